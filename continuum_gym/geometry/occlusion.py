@@ -1,0 +1,147 @@
+"""Visual Occlusion Index (VOI) of paper 000, eq (27), exactly as ERRATA §1.3 item 13 reads it.
+
+VOI = [sin nu / (2 sin beta cos(nu - beta))]^2 (1 - (r_e/r_max)^3): the squared fraction of the cone
+diameter swept by the body, times the fraction of the cone volume between slant heights r_e and r_max.
+
+- r_max: slant height of the tip; samples: ``MultiBackboneRobot.backbone`` (inserted part, then 40
+  intervals per segment).
+- entry: the first sample with d <= 0 and r > 0, linearly interpolated at d = 0 against its predecessor.
+- nu: the largest angle seen from the cone vertex between the entry point and the samples from the
+  entry onward that are inside (d <= 0, r > 0) with r <= r_max; nu := min(nu, 2 beta).
+- VOI = 0 if no sample is inside, none qualifies for nu, or r_e >= r_max.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from continuum_gym.geometry.lens_cone import cone_distance_slant, resolve_cone, to_lens
+from continuum_gym.robots.mbcr import DOF, _as_q, all_finite, backbone_kernel, backbone_sample_count, make_workspace
+
+VOI_SAMPLES_PER_SEGMENT = 40
+
+
+@njit(cache=True)
+def voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr):
+    """(voi, nu, r_e, r_max) of one sampled backbone ``points`` (m, 3); ``lens`` (m, 3), ``dr`` (m, 2) scratch.
+
+    r_e is NaN when there is no entry point.
+    """
+    m = points.shape[0]
+    for i in range(m):
+        xl, yl, zl = to_lens(points[i, 0], points[i, 1], points[i, 2], gamma, d_o, alpha, model)
+        lens[i, 0] = xl
+        lens[i, 1] = yl
+        lens[i, 2] = zl
+        d, r, _ = cone_distance_slant(xl, yl, zl, beta)
+        dr[i, 0] = d
+        dr[i, 1] = r
+    r_max = dr[m - 1, 1]
+    entry = -1
+    for i in range(m):
+        if dr[i, 0] <= 0.0 and dr[i, 1] > 0.0:
+            entry = i
+            break
+    if entry < 0:
+        return 0.0, 0.0, math.nan, r_max
+    if entry > 0:
+        d_prev = dr[entry - 1, 0]
+        t = d_prev / (d_prev - dr[entry, 0])
+        ex = lens[entry - 1, 0] + t * (lens[entry, 0] - lens[entry - 1, 0])
+        ey = lens[entry - 1, 1] + t * (lens[entry, 1] - lens[entry - 1, 1])
+        ez = lens[entry - 1, 2] + t * (lens[entry, 2] - lens[entry - 1, 2])
+    else:
+        ex = lens[0, 0]
+        ey = lens[0, 1]
+        ez = lens[0, 2]
+    _, r_e, _ = cone_distance_slant(ex, ey, ez, beta)
+    if r_e >= r_max:
+        return 0.0, 0.0, r_e, r_max
+    nu = -1.0
+    for i in range(entry, m):
+        if dr[i, 0] <= 0.0 and dr[i, 1] > 0.0 and dr[i, 1] <= r_max:
+            px = lens[i, 0]
+            py = lens[i, 1]
+            pz = lens[i, 2]
+            cx = ey * pz - ez * py
+            cy = ez * px - ex * pz
+            cz = ex * py - ey * px
+            angle = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ex * px + ey * py + ez * pz)
+            if angle > nu:
+                nu = angle
+    if nu < 0.0:
+        return 0.0, 0.0, r_e, r_max
+    nu = min(nu, 2.0 * beta)
+    sweep = math.sin(nu) / (2.0 * math.sin(beta) * math.cos(nu - beta))
+    voi = sweep * sweep * (1.0 - (r_e / r_max) ** 3)
+    return voi, nu, r_e, r_max
+
+
+@njit(cache=True)
+def voi_of_configuration(q, lengths, ws, gamma, d_o, alpha, beta, model, n_insert, n_per_segment,
+                         points, lens, dr):
+    """VOI tuple of one configuration; ``points``, ``lens`` (m, 3) and ``dr`` (m, 2) are scratch."""
+    backbone_kernel(q, lengths, ws, n_insert, n_per_segment, points)
+    return voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr)
+
+
+@njit(cache=True)
+def _voi_batch(qs, G, lengths, d_o, alpha, beta, model, n_insert, n_per_segment, out):
+    if not all_finite(qs):
+        return False
+    ws = make_workspace()
+    m = n_insert + 3 * n_per_segment + 1
+    points = np.empty((m, 3))
+    lens = np.empty((m, 3))
+    dr = np.empty((m, 2))
+    for i in range(qs.shape[0]):
+        voi, nu, r_e, r_max = voi_of_configuration(qs[i], lengths, ws, G[i], d_o, alpha, beta, model,
+                                                   n_insert, n_per_segment, points, lens, dr)
+        out[i, 0] = voi
+        out[i, 1] = nu
+        out[i, 2] = r_e
+        out[i, 3] = r_max
+    return True
+
+
+def occlusion_details(robot, q, gamma, cone=None, n_per_segment: int = VOI_SAMPLES_PER_SEGMENT):
+    """VOI and its parts: dict of ``voi``, ``nu`` (rad), ``r_e`` (m, NaN without entry), ``r_max`` (m).
+
+    Shapes: the broadcast of q.shape[:-1] and gamma.shape.
+    """
+    cone = resolve_cone(cone)
+    q = _as_q(q)
+    gamma = np.asarray(gamma, dtype=np.float64)
+    if not np.all(np.isfinite(gamma)):
+        raise ValueError(f"gamma must be finite (rad); got {gamma}")
+    try:
+        shape = np.broadcast_shapes(q.shape[:-1], gamma.shape)
+    except ValueError as error:
+        raise ValueError(f"gamma of shape {gamma.shape} does not broadcast with q of shape {q.shape}") from error
+    if int(n_per_segment) != n_per_segment or n_per_segment < 1:
+        raise ValueError(f"n_per_segment must be an integer >= 1; got {n_per_segment!r}")
+    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (DOF,)).reshape(-1, DOF))
+    G = np.ascontiguousarray(np.broadcast_to(gamma, shape).reshape(-1))
+    out = np.empty((Q.shape[0], 4))
+    if not _voi_batch(Q, G, robot._lengths_array, *cone.kernel_args, int(robot.n_insert_samples),
+                      int(n_per_segment), out):
+        raise ValueError(f"q must be finite (no NaN or inf); got {q}")
+    return {key: out[:, k].reshape(shape) for k, key in enumerate(("voi", "nu", "r_e", "r_max"))}
+
+
+def visual_occlusion_index(robot, q, gamma, cone=None) -> np.ndarray:
+    """Visual Occlusion Index (eq 27, ERRATA §1.3 item 13) of shape q.shape[:-1] (0-d for one q).
+
+    Args:
+        robot: a ``MultiBackboneRobot``.
+        q: configuration(s), (..., 7).
+        gamma: endoscope rotation (rad); broadcasts with q.shape[:-1].
+        cone: ``LensCone`` (d_o, alpha, beta, lens model); None means the paper's (literal lens).
+    """
+    return occlusion_details(robot, q, gamma, cone)["voi"]
+
+
+__all__ = ["visual_occlusion_index", "occlusion_details", "backbone_sample_count", "VOI_SAMPLES_PER_SEGMENT"]
