@@ -1,0 +1,51 @@
+"""What every analytic controller shares: SB3's ``predict`` protocol and input checks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def as_finite(x, tail: tuple, name: str) -> np.ndarray:
+    """``x`` as float64 with trailing shape ``tail`` and finite entries, else ``ValueError`` naming it."""
+    try:
+        array = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a numeric array of shape (..., {', '.join(map(str, tail))})") from error
+    if array.ndim < len(tail) or (tail and array.shape[-len(tail):] != tail):
+        raise ValueError(f"{name} must have shape (...,{''.join(' ' + str(t) + ',' for t in tail)}); "
+                         f"got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite (no NaN or inf)")
+    return array
+
+
+class Controller:
+    """Base of the analytic baselines.
+
+    Subclasses implement ``joint_rates(q, target, ...)`` (the plain kinematic call) and ``predict``
+    with SB3's exact signature, so one evaluation path serves baselines and learned agents.
+    ``name`` is the registry name; ``action_dim`` the length of the command.
+    """
+
+    name = "controller"
+    action_dim = 0
+
+    def joint_rates(self, q, target, *args, **kwargs):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=False):  # pragma: no cover
+        raise NotImplementedError
+
+    @staticmethod
+    def _observation_dict(observation, required):
+        if not isinstance(observation, dict):
+            raise ValueError(
+                "analytic controllers read a dict observation with keys "
+                f"{list(required)}; got {type(observation).__name__}")
+        missing = [key for key in required if key not in observation]
+        if missing:
+            raise ValueError(f"observation lacks keys {missing}; required: {list(required)}")
+        return observation
+
+    def __repr__(self):
+        return f"{type(self).__name__}()"

@@ -1,0 +1,115 @@
+"""Rotation helpers as compiled kernels: rotation vectors (log map) and small dense solves."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def rotation_log(R, out):
+    """Rotation vector (axis * angle, rad) of a 3x3 rotation R into ``out``; robust at 0 and pi.
+
+    Goes through the unit quaternion (Shepperd's method), so no branch loses precision.
+    """
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    if trace > R[0, 0] and trace > R[1, 1] and trace > R[2, 2]:
+        s = math.sqrt(max(trace + 1.0, 0.0)) * 2.0
+        w = 0.25 * s
+        x = (R[2, 1] - R[1, 2]) / s
+        y = (R[0, 2] - R[2, 0]) / s
+        z = (R[1, 0] - R[0, 1]) / s
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = math.sqrt(max(1.0 + R[0, 0] - R[1, 1] - R[2, 2], 0.0)) * 2.0
+        w = (R[2, 1] - R[1, 2]) / s
+        x = 0.25 * s
+        y = (R[0, 1] + R[1, 0]) / s
+        z = (R[0, 2] + R[2, 0]) / s
+    elif R[1, 1] > R[2, 2]:
+        s = math.sqrt(max(1.0 + R[1, 1] - R[0, 0] - R[2, 2], 0.0)) * 2.0
+        w = (R[0, 2] - R[2, 0]) / s
+        x = (R[0, 1] + R[1, 0]) / s
+        y = 0.25 * s
+        z = (R[1, 2] + R[2, 1]) / s
+    else:
+        s = math.sqrt(max(1.0 + R[2, 2] - R[0, 0] - R[1, 1], 0.0)) * 2.0
+        w = (R[1, 0] - R[0, 1]) / s
+        x = (R[0, 2] + R[2, 0]) / s
+        y = (R[1, 2] + R[2, 1]) / s
+        z = 0.25 * s
+    if w < 0.0:
+        w = -w
+        x = -x
+        y = -y
+        z = -z
+    norm_v = math.sqrt(x * x + y * y + z * z)
+    if norm_v < 1e-300:
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = 0.0
+        return
+    angle = 2.0 * math.atan2(norm_v, w)
+    scale = angle / norm_v
+    out[0] = x * scale
+    out[1] = y * scale
+    out[2] = z * scale
+
+
+@njit(cache=True)
+def orientation_error(R_des, R, work, out):
+    """log(R_des R^T) (rad), the world-frame rotation that takes R to R_des (ERRATA §1.3 item 11)."""
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for c in range(3):
+                acc += R_des[a, c] * R[b, c]
+            work[a, b] = acc
+    rotation_log(work, out)
+
+
+@njit(cache=True)
+def cholesky_solve_inplace(A, B):
+    """Solve A X = B for symmetric positive-definite A (n x n) and B (n x m); B becomes X, A its factor.
+
+    Small dense systems (6 x 6 damped Gram matrices) are faster here than a LAPACK call.
+    Returns False if A is not numerically positive definite.
+    """
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= A[j, k] * A[j, k]
+        if s <= 0.0:
+            return False
+        ljj = math.sqrt(s)
+        A[j, j] = ljj
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= A[i, k] * A[j, k]
+            A[i, j] = s / ljj
+    m = B.shape[1]
+    for col in range(m):
+        for i in range(n):
+            s = B[i, col]
+            for k in range(i):
+                s -= A[i, k] * B[k, col]
+            B[i, col] = s / A[i, i]
+        for i in range(n - 1, -1, -1):
+            s = B[i, col]
+            for k in range(i + 1, n):
+                s -= A[k, i] * B[k, col]
+            B[i, col] = s / A[i, i]
+    return True
+
+
+def rotation_vector(R) -> np.ndarray:
+    """Batched log map: rotation vectors (..., 3) in rad of rotations (..., 3, 3)."""
+    R = np.asarray(R, dtype=np.float64)
+    flat = np.ascontiguousarray(R.reshape(-1, 3, 3))
+    out = np.empty((flat.shape[0], 3))
+    for i in range(flat.shape[0]):
+        rotation_log(flat[i], out[i])
+    return out.reshape(R.shape[:-2] + (3,))
