@@ -46,6 +46,7 @@ class LensCone:
         object.__setattr__(self, "beta", angle_in_open_interval(self.beta, "beta", 0.0, math.pi / 2, "(0, pi/2)"))
         if self.lens_model not in LENS_MODELS:
             raise ValueError(f"lens_model must be one of {LENS_MODELS}; got {self.lens_model!r}")
+        object.__setattr__(self, "_kernel_args", (self.d_o, self.alpha, self.beta, self.model_code))
 
     @property
     def model_code(self) -> int:
@@ -55,7 +56,7 @@ class LensCone:
     @property
     def kernel_args(self) -> tuple:
         """(d_o, alpha, beta, model_code): the scalar arguments of every cone kernel."""
-        return (self.d_o, self.alpha, self.beta, self.model_code)
+        return self._kernel_args
 
 
 DEFAULT_CONE = LensCone()
@@ -72,14 +73,10 @@ def resolve_cone(cone) -> LensCone:
 
 # ---------------------------------------------------------------------- compiled kernels
 @njit(cache=True, inline="always")
-def to_lens(px, py, pz, gamma, d_o, alpha, model):
-    """Point (m) from {w} to {lens}: eq (15), both lens models. Returns (x_l, y_l, z_l)."""
+def to_lens_cs(px, py, pz, cg, sg, ca, sa, d_o, model):
+    """``to_lens`` with cos/sin of gamma and alpha precomputed (for loops over many points)."""
     if model == 1:
         py = py - d_o
-    cg = math.cos(gamma)
-    sg = math.sin(gamma)
-    ca = math.cos(alpha)
-    sa = math.sin(alpha)
     # Rz(-gamma) then Ry(alpha)
     ux = cg * px + sg * py
     uy = -sg * px + cg * py
@@ -89,6 +86,12 @@ def to_lens(px, py, pz, gamma, d_o, alpha, model):
     if model == 0:
         yl -= d_o
     return xl, yl, zl
+
+
+@njit(cache=True, inline="always")
+def to_lens(px, py, pz, gamma, d_o, alpha, model):
+    """Point (m) from {w} to {lens}: eq (15), both lens models. Returns (x_l, y_l, z_l)."""
+    return to_lens_cs(px, py, pz, math.cos(gamma), math.sin(gamma), math.cos(alpha), math.sin(alpha), d_o, model)
 
 
 @njit(cache=True, inline="always")

@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from continuum_gym.geometry.lens_cone import cone_distance_slant, resolve_cone, to_lens
+from continuum_gym.geometry.lens_cone import cone_distance_slant, resolve_cone, to_lens_cs
 from continuum_gym.robots.mbcr import DOF, _as_q, all_finite, backbone_kernel, backbone_sample_count, make_workspace
 
 VOI_SAMPLES_PER_SEGMENT = 40
@@ -31,8 +31,12 @@ def voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr):
     r_e is NaN when there is no entry point.
     """
     m = points.shape[0]
+    cg = math.cos(gamma)
+    sg = math.sin(gamma)
+    ca = math.cos(alpha)
+    sa = math.sin(alpha)
     for i in range(m):
-        xl, yl, zl = to_lens(points[i, 0], points[i, 1], points[i, 2], gamma, d_o, alpha, model)
+        xl, yl, zl = to_lens_cs(points[i, 0], points[i, 1], points[i, 2], cg, sg, ca, sa, d_o, model)
         lens[i, 0] = xl
         lens[i, 1] = yl
         lens[i, 2] = zl
@@ -107,6 +111,17 @@ def _voi_batch(qs, G, lengths, d_o, alpha, beta, model, n_insert, n_per_segment,
     return True
 
 
+@njit(cache=True)
+def _voi_single(q, gamma, lengths, d_o, alpha, beta, model, n_insert, n_per_segment):
+    if not all_finite(q) or not math.isfinite(gamma):
+        return False, 0.0, 0.0, 0.0, 0.0
+    m = n_insert + 3 * n_per_segment + 1
+    voi, nu, r_e, r_max = voi_of_configuration(q, lengths, make_workspace(), gamma, d_o, alpha, beta, model,
+                                               n_insert, n_per_segment, np.empty((m, 3)), np.empty((m, 3)),
+                                               np.empty((m, 2)))
+    return True, voi, nu, r_e, r_max
+
+
 def occlusion_details(robot, q, gamma, cone=None, n_per_segment: int = VOI_SAMPLES_PER_SEGMENT):
     """VOI and its parts: dict of ``voi``, ``nu`` (rad), ``r_e`` (m, NaN without entry), ``r_max`` (m).
 
@@ -114,6 +129,12 @@ def occlusion_details(robot, q, gamma, cone=None, n_per_segment: int = VOI_SAMPL
     """
     cone = resolve_cone(cone)
     q = _as_q(q)
+    if q.ndim == 1 and isinstance(gamma, (float, int)) and n_per_segment == VOI_SAMPLES_PER_SEGMENT:
+        ok, *values = _voi_single(q, float(gamma), robot._lengths_array, *cone.kernel_args,
+                                  int(robot.n_insert_samples), VOI_SAMPLES_PER_SEGMENT)
+        if not ok:
+            raise ValueError(f"q and gamma must be finite (no NaN or inf); got q={q}, gamma={gamma}")
+        return {key: np.asarray(v) for key, v in zip(("voi", "nu", "r_e", "r_max"), values)}
     gamma = np.asarray(gamma, dtype=np.float64)
     if not np.all(np.isfinite(gamma)):
         raise ValueError(f"gamma must be finite (rad); got {gamma}")

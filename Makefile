@@ -1,0 +1,35 @@
+# Fresh-machine entry points: `make demo` (set up + main job) and `make test` (set up + tests).
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: setup demo test test-fast bench reproduce clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# The local CPU wheel first: a bare `torch` requirement would pull a multi-GB CUDA build.
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+demo: setup
+	$(BIN)/continuum-gym demo --out results/demo
+
+reproduce: setup
+	$(BIN)/continuum-gym reproduce --out results/reproduce --json results/reproduce/reproduce.json
+
+test: setup
+	$(BIN)/python -m pytest -q -n 2
+
+test-fast: setup
+	$(BIN)/python -m pytest -q -n 2 -m "not slow"
+
+bench: setup
+	$(BIN)/python benchmarks/kinematics.py --json results/bench/kinematics.json
+
+clean:
+	rm -rf $(VENV) results
