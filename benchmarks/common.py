@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import resource
 import sys
-import tempfile
 import time
-from pathlib import Path
+
+from continuum_gym.evaluation.io import write_json_atomic as write_json  # noqa: F401  (re-export)
 
 
 def best_seconds(fn, number: int, repeat: int = 5) -> float:
@@ -31,16 +30,6 @@ def peak_rss_mib() -> float:
 
 def machine() -> dict:
     return {"python": sys.version.split()[0], "platform": platform.platform(), "cpus": os.cpu_count()}
-
-
-def write_json(path, payload: dict) -> None:
-    """Write atomically: a temp file in the same directory, then rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as handle:
-        json.dump(payload, handle, indent=2)
-        tmp = handle.name
-    os.replace(tmp, path)
 
 
 def print_table(rows, headers) -> None:
