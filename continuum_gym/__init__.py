@@ -1,5 +1,12 @@
-"""continuum-gym: Gymnasium environments for continuum surgical robots beside an endoscope."""
+"""continuum-gym: Gymnasium environments for continuum surgical robots beside an endoscope.
+
+``import continuum_gym`` registers the ``ContinuumGym/`` environment ids with Gymnasium.
+"""
 
 __version__ = "0.1.0"
 
-__all__ = ["__version__"]
+from continuum_gym.envs.registration import ENV_IDS, register_envs  # noqa: E402
+
+register_envs()
+
+__all__ = ["__version__", "ENV_IDS"]
