@@ -9,10 +9,12 @@ step and stores ``terminal_observation`` as SB3 expects.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from numba import njit
 from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -20,20 +22,40 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 TASK_SPLITS = ("train", "test")
 
 
+@njit(cache=True)
+def _clip_rows(array, clipped):
+    """Clip (N, d) to [-1, 1] in place, marking clipped rows; False if anything is non-finite."""
+    for i in range(array.shape[0]):
+        clipped[i] = False
+        for k in range(array.shape[1]):
+            value = array[i, k]
+            if not math.isfinite(value):
+                return False
+            if value > 1.0:
+                array[i, k] = 1.0
+                clipped[i] = True
+            elif value < -1.0:
+                array[i, k] = -1.0
+                clipped[i] = True
+    return True
+
+
 def check_actions(actions, shape, name="action") -> tuple[np.ndarray, np.ndarray]:
-    """Validate actions: exact shape, finite; clip to [-1, 1] and report which rows were clipped."""
+    """Validate actions: exact shape, finite; clip to [-1, 1] and report which rows were clipped.
+
+    Returns a fresh (N, d) float64 array (the caller's array is never modified) and a bool mask (N,).
+    """
     try:
-        array = np.asarray(actions, dtype=np.float64)
+        array = np.array(actions, dtype=np.float64, ndmin=1)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} must be a numeric array of shape {shape}") from error
     if array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}; got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite (no NaN or inf); got {array}")
-    clipped = np.atleast_1d(np.any(np.abs(array) > 1.0, axis=-1))
-    if np.any(clipped):
-        array = np.clip(array, -1.0, 1.0)
-    return np.ascontiguousarray(array), clipped
+    rows = array.reshape(-1, shape[-1])
+    clipped = np.empty(rows.shape[0], dtype=bool)
+    if not _clip_rows(rows, clipped):
+        raise ValueError(f"{name} must be finite (no NaN or inf); got {actions}")
+    return rows, clipped
 
 
 def validate_weights(weights, defaults: dict) -> dict:
@@ -81,8 +103,21 @@ class BatchedCore:
     def info(self, rows=None) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def info_row(self, row: int) -> dict:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def reward_terms(self) -> dict:
+        return {key: self.terms[:, k].copy() for k, key in enumerate(self.reward_names)}
+
+    def reward_terms_row(self, row: int) -> dict:
+        return dict(zip(self.reward_names, self.terms[row].tolist()))
+
     def sample_task_id(self, rng: np.random.Generator) -> int:
         return int(rng.integers(0, self.task_count))
+
+
+#: BIT_TABLE[bits] is the bool vector of an 8-bit joint mask (clamped or frozen joints).
+BIT_TABLE = ((np.arange(256)[:, None] >> np.arange(8)) & 1).astype(bool)
 
 
 # ---------------------------------------------------------------------- single env
@@ -104,6 +139,7 @@ class ContinuumEnv(gym.Env):
         self._scene = None
         self._pixel_occlusion = bool(pixel_occlusion)
         self._needs_reset = True
+        self._active = np.ones(1, dtype=np.uint8)
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
@@ -119,14 +155,14 @@ class ContinuumEnv(gym.Env):
         if self._needs_reset:
             raise RuntimeError("call reset() before step(): the episode has ended or never started")
         action, clipped = check_actions(action, self.action_space.shape)
-        rewards, terminated, truncated = self.core.step(action[None], np.ones(1, dtype=np.uint8))
+        rewards, terminated, truncated = self.core.step(action, self._active)
         self._needs_reset = bool(terminated[0] or truncated[0])
         return (self.core.obs[0].astype(np.float32), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
                 self._info(clipped=bool(clipped[0])))
 
     def _info(self, clipped):
-        info = {key: (value[0] if isinstance(value, np.ndarray) else value) for key, value in self.core.info().items()}
-        info["reward_terms"] = {key: float(value[0]) for key, value in self.core.reward_terms().items()}
+        info = self.core.info_row(0)
+        info["reward_terms"] = self.core.reward_terms_row(0)
         info["action_clipped"] = clipped
         if self._pixel_occlusion:
             info["pixel_occlusion"] = self.core.pixel_occlusion(0, self._get_scene())

@@ -10,6 +10,7 @@ from gymnasium import spaces
 from continuum_gym.baselines.occlusion import OcclusionLimits
 from continuum_gym.baselines.registry import OCCLUSION_CONTROLLERS, make_controller
 from continuum_gym.envs.batched import (
+    BIT_TABLE,
     TASK_SPLITS,
     BatchedCore,
     ContinuumEnv,
@@ -40,6 +41,8 @@ RESIDUAL_SPACES = ("nullspace", "joint")
 
 class OcclusionCore(BatchedCore):
     """Batched state and step of the occlusion-avoidance environment (see ``OcclusionAvoidanceEnv``)."""
+
+    reward_names = REWARD_TERMS
 
     def __init__(self, num_envs=1, task="hold", task_split="train", base_controller="projected_gradient",
                  residual_scale=0.3, residual_space="nullspace", reward_weights=None, control_dt=0.01, substeps=10,
@@ -88,6 +91,14 @@ class OcclusionCore(BatchedCore):
         self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
                                      self.limits.max_bend, self.limits.insertion)
         self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
+        lengths, stiffness, segments, fractions, prm, has_base = self._model_args()
+        self._step_args = (
+            self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.R_des,
+            self.tasks.duration, self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm,
+            has_base, self.residual_space == "nullspace", self.residual_scale if has_base else 1.0,
+            self.rate_scale_vec, self.limits.rate_limit, self.limits.gamma_rate, self.limits.lower,
+            self.limits.upper, self.limits.max_bend, self._weights, VISIBILITY_FRACTION, self.base_cmd,
+            self.base_info, self.obs, self.metrics, self.terms, self.rewards, self.flags)
 
     # ------------------------------------------------------------------ state
     def reset_rows(self, rows, task_ids):
@@ -116,18 +127,30 @@ class OcclusionCore(BatchedCore):
                 self.base_controller is not None)
 
     def step(self, actions, active):
-        lengths, stiffness, segments, fractions, prm, has_base = self._model_args()
-        scale = self.residual_scale if has_base else 1.0
-        occlusion_step_batch(self.q, self.gamma, self.steps, actions, active, self.tasks.centre, self.tasks.amp,
-                             self.tasks.omega, self.tasks.phase, self.tasks.R_des, self.tasks.duration,
-                             self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm, has_base,
-                             self.residual_space == "nullspace", scale, self.rate_scale_vec,
-                             self.limits.rate_limit, self.limits.gamma_rate, self.limits.lower, self.limits.upper,
-                             self.limits.max_bend, self._weights, VISIBILITY_FRACTION, self.base_cmd,
-                             self.base_info, self.obs, self.metrics, self.terms, self.rewards, self.flags)
-        return self.rewards, self.flags[:, 3].astype(bool), self.flags[:, 4].astype(bool)
+        occlusion_step_batch(self.q, self.gamma, self.steps, actions, active, *self._step_args)
+        return self.rewards, self.flags[:, 3] != 0, self.flags[:, 4] != 0
 
     # ------------------------------------------------------------------ info
+    def info_row(self, row):
+        m = self.metrics[row]
+        f = self.flags[row]
+        return {
+            "voi": float(m[0]),
+            "tip_error_m": float(m[1]),
+            "orientation_error_rad": float(m[2]),
+            "tip_view_fraction": float(m[3]),
+            "tip_in_view": bool(m[3] <= VISIBILITY_FRACTION),
+            "gamma": float(self.gamma[row]),
+            "clamped_joints": BIT_TABLE[f[0] & 127, :7].copy(),
+            "rate_saturated": bool(f[1]),
+            "gamma_rate_saturated": bool(f[2]),
+            "base_frozen_joints": BIT_TABLE[f[5] & 127, :7].copy(),
+            "base_rate_saturated": bool(f[6]),
+            "base_command": self.base_cmd[row].copy(),
+            "task_id": int(self.tasks.task_id[row]),
+            "elapsed_steps": int(self.steps[row]),
+        }
+
     def info(self):
         bits = np.arange(7)
         return {
@@ -146,9 +169,6 @@ class OcclusionCore(BatchedCore):
             "task_id": self.tasks.task_id.copy(),
             "elapsed_steps": self.steps.copy(),
         }
-
-    def reward_terms(self):
-        return {key: self.terms[:, k].copy() for k, key in enumerate(REWARD_TERMS)}
 
     def controller_observation(self, row=0):
         """The dict observation an analytic controller's ``predict`` reads, for one row."""

@@ -9,6 +9,7 @@ from gymnasium import spaces
 
 from continuum_gym.baselines.registry import VIEW_TRACKING_CONTROLLERS, make_controller
 from continuum_gym.envs.batched import (
+    BIT_TABLE,
     TASK_SPLITS,
     BatchedCore,
     ContinuumEnv,
@@ -36,6 +37,8 @@ ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, ma
 
 class ViewTrackingCore(BatchedCore):
     """Batched state and step of the view-tracking environment (see ``ViewTrackingEnv``)."""
+
+    reward_names = REWARD_TERMS
 
     def __init__(self, num_envs=1, task="random", task_split="train", base_controller="dimension_reduced",
                  residual_scale=0.3, reward_weights=None, control_dt=0.01, substeps=1, rate_limits=None, grid=21,
@@ -88,9 +91,13 @@ class ViewTrackingCore(BatchedCore):
         self.flags = np.zeros((n, 4), dtype=np.int64)
         self.tasks = view_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt, self.grid)
         self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
-
-    def sample_task_id(self, rng):
-        return int(rng.integers(0, self.task_count))
+        has_base = self.base_controller is not None
+        g = self._geometry_args()
+        self._step_args = (
+            self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.duration,
+            self.control_dt, self.robot._geom, self.controller.params, has_base,
+            self.residual_scale if has_base else 1.0, ACTION_SCALE, self.rate_limits, *g[:4], *g[5:], self._weights,
+            self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
 
     def _geometry_args(self):
         f = self.frustum
@@ -115,13 +122,8 @@ class ViewTrackingCore(BatchedCore):
                            self.base_cmd, self.obs, self.metrics)
 
     def step(self, actions, active):
-        has_base = self.base_controller is not None
-        view_step_batch(self.q, self.steps, actions, active, self.tasks.centre, self.tasks.amp, self.tasks.omega,
-                        self.tasks.phase, self.tasks.duration, self.control_dt, self.robot._geom,
-                        self.controller.params, has_base, self.residual_scale if has_base else 1.0, ACTION_SCALE,
-                        self.rate_limits, *self._geometry_args()[:4], *self._geometry_args()[5:], self._weights,
-                        self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
-        return self.rewards, self.flags[:, 2].astype(bool), self.flags[:, 3].astype(bool)
+        view_step_batch(self.q, self.steps, actions, active, *self._step_args)
+        return self.rewards, self.flags[:, 2] != 0, self.flags[:, 3] != 0
 
     def info(self):
         bits = np.arange(6)
@@ -136,8 +138,19 @@ class ViewTrackingCore(BatchedCore):
             "elapsed_steps": self.steps.copy(),
         }
 
-    def reward_terms(self):
-        return {key: self.terms[:, k].copy() for k, key in enumerate(REWARD_TERMS)}
+    def info_row(self, row):
+        m = self.metrics[row]
+        f = self.flags[row]
+        return {
+            "overlap_ratio": float(m[0]),
+            "position_error_m": float(m[1]),
+            "orientation_error_rad": float(m[2]),
+            "clamped_joints": BIT_TABLE[f[0] & 63, :6].copy(),
+            "rate_saturated": bool(f[1]),
+            "base_command": self.base_cmd[row].copy(),
+            "task_id": int(self.tasks.task_id[row]),
+            "elapsed_steps": int(self.steps[row]),
+        }
 
     def davinci_configuration(self, row=0):
         """q_davinci [L_dV, yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
