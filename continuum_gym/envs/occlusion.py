@@ -87,6 +87,7 @@ class OcclusionCore(BatchedCore):
         self.metrics = np.zeros((n, 4))
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
+        self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, 7), dtype=np.int64)
         self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
                                      self.limits.max_bend, self.limits.insertion)
@@ -94,7 +95,7 @@ class OcclusionCore(BatchedCore):
         lengths, stiffness, segments, fractions, prm, has_base = self._model_args()
         self._step_args = (
             self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.R_des,
-            self.tasks.duration, self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm,
+            self.tasks.duration, self.limit, self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm,
             has_base, self.residual_space == "nullspace", self.residual_scale if has_base else 1.0,
             self.rate_scale_vec, self.limits.rate_limit, self.limits.gamma_rate, self.limits.lower,
             self.limits.upper, self.limits.max_bend, self._weights, VISIBILITY_FRACTION, self.base_cmd,
@@ -107,8 +108,9 @@ class OcclusionCore(BatchedCore):
                                 self.limits.insertion)
         for field in ("start_q", "start_gamma", "centre", "amp", "omega", "phase", "R_des", "duration", "task_id"):
             getattr(self.tasks, field)[rows] = getattr(fresh, field)
+        self.limit[rows] = fresh.duration
         if self.max_episode_steps is not None:
-            self.tasks.duration[rows] = np.minimum(self.tasks.duration[rows], self.max_episode_steps)
+            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
         self.q[rows] = fresh.start_q
         self.gamma[rows] = fresh.start_gamma
         self.steps[rows] = 0

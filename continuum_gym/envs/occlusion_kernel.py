@@ -158,8 +158,8 @@ def occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration,
 
 
 @njit(cache=True)
-def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, control_dt, substeps,
-                         lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
+def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, limit, control_dt,
+                         substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
                          rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend, weights,
                          visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags):
     """Advance every row by one control step; fills obs, metrics, reward terms, rewards and flags.
@@ -265,7 +265,7 @@ def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase,
         flags[i, 1] = rate_saturated
         flags[i, 2] = gamma_saturated
         flags[i, 3] = 1 if (metrics[i, 1] > MAX_TIP_ERROR or not math.isfinite(metrics[i, 1])) else 0
-        flags[i, 4] = 1 if step[i] >= duration[i] else 0
+        flags[i, 4] = 1 if step[i] >= limit[i] else 0
         flags[i, 5] = base_frozen
         flags[i, 6] = base_saturated
 

@@ -44,12 +44,10 @@ class ContinuumSB3VecEnv(VecEnv):
         self.env_id = env_id
         self.env_kwargs = dict(kwargs)
         self.core = core_class(env_id)(num_envs=num_envs, **kwargs)
+        self.render_mode = None
         super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
         self._rngs = row_generators(seed, num_envs)
         self._actions = None
-        self._episode_returns = np.zeros(num_envs)
-        self._episode_lengths = np.zeros(num_envs, dtype=np.int64)
-        self.render_mode = None
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self):
@@ -58,8 +56,6 @@ class ContinuumSB3VecEnv(VecEnv):
             self._reset_seeds()
         ids = np.array([self.core.sample_task_id(rng) for rng in self._rngs])
         self.core.reset_rows(np.arange(self.num_envs), ids)
-        self._episode_returns[:] = 0.0
-        self._episode_lengths[:] = 0
         return self.core.obs.astype(np.float32)
 
     def step_async(self, actions):
@@ -71,8 +67,6 @@ class ContinuumSB3VecEnv(VecEnv):
         rewards, terminated, truncated = self.core.step(actions, np.ones(self.num_envs, dtype=np.uint8))
         rewards = rewards.astype(np.float32)
         dones = terminated | truncated
-        self._episode_returns += rewards
-        self._episode_lengths += 1
         obs = self.core.obs.astype(np.float32)
         metrics = self.core.info()
         infos = []
@@ -82,22 +76,20 @@ class ContinuumSB3VecEnv(VecEnv):
             if dones[i]:
                 info["terminal_observation"] = obs[i].copy()
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-                info["episode"] = {"r": float(self._episode_returns[i]), "l": int(self._episode_lengths[i])}
             infos.append(info)
         finished = np.flatnonzero(dones)
         if len(finished):
             ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in finished])
             self.core.reset_rows(finished, ids)
             obs[finished] = self.core.obs[finished]
-            self._episode_returns[finished] = 0.0
-            self._episode_lengths[finished] = 0
         return obs, rewards, dones, infos
 
     def close(self):
         pass
 
     def get_attr(self, attr_name, indices=None):
-        return [getattr(self.core, attr_name) for _ in self._indices(indices)]
+        owner = self.core if hasattr(self.core, attr_name) else self
+        return [getattr(owner, attr_name) for _ in self._indices(indices)]
 
     def set_attr(self, attr_name, value, indices=None):
         setattr(self.core, attr_name, value)

@@ -104,7 +104,7 @@ def view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, ge
 
 
 @njit(cache=True)
-def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duration, control_dt, geom, prm, has_base,
+def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom, prm, has_base,
                     residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far,
                     weights, base_cmd, obs, metrics, terms, rewards, flags):
     """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for every active row.
@@ -145,7 +145,7 @@ def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duratio
         flags[i, 0] = clamped
         flags[i, 1] = 1 if scale < 1.0 else 0
         flags[i, 2] = 0 if math.isfinite(metrics[i, 1]) else 1
-        flags[i, 3] = 1 if step[i] >= duration[i] else 0
+        flags[i, 3] = 1 if step[i] >= limit[i] else 0
 
 
 @njit(cache=True)

@@ -88,6 +88,7 @@ class ViewTrackingCore(BatchedCore):
         self.metrics = np.zeros((n, 3))
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
+        self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, 4), dtype=np.int64)
         self.tasks = view_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt, self.grid)
         self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
@@ -95,7 +96,7 @@ class ViewTrackingCore(BatchedCore):
         g = self._geometry_args()
         self._step_args = (
             self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.duration,
-            self.control_dt, self.robot._geom, self.controller.params, has_base,
+            self.limit, self.control_dt, self.robot._geom, self.controller.params, has_base,
             self.residual_scale if has_base else 1.0, ACTION_SCALE, self.rate_limits, *g[:4], *g[5:], self._weights,
             self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
 
@@ -109,8 +110,9 @@ class ViewTrackingCore(BatchedCore):
         fresh = view_tasks(self.task, self.task_split, task_ids, self.control_dt, self.grid)
         for field in ("start_q", "centre", "amp", "omega", "phase", "duration", "task_id"):
             getattr(self.tasks, field)[rows] = getattr(fresh, field)
+        self.limit[rows] = fresh.duration
         if self.max_episode_steps is not None:
-            self.tasks.duration[rows] = np.minimum(self.tasks.duration[rows], self.max_episode_steps)
+            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
         self.q[rows] = fresh.start_q
         self.steps[rows] = 0
         self.flags[rows] = 0

@@ -1,0 +1,303 @@
+"""The environments against Gymnasium's and SB3's checkers, the baselines they wrap, and themselves."""
+
+from __future__ import annotations
+
+import copy
+import math
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import continuum_gym
+from continuum_gym.baselines import DimensionReduced, OcclusionLimits, ProjectedGradient
+from continuum_gym.envs.occlusion import OcclusionAvoidanceEnv, OcclusionAvoidanceVectorEnv
+from continuum_gym.envs.occlusion_kernel import trajectory_batch
+from continuum_gym.envs.tasks import hold_start_pool
+from continuum_gym.envs.view_tracking import ViewTrackingEnv, ViewTrackingVectorEnv
+
+OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
+VIEW = "ContinuumGym/ViewTracking-v0"
+
+
+def test_registry_lists_every_id():
+    assert continuum_gym.ENV_IDS == [OCCLUSION, VIEW]
+    for env_id in continuum_gym.ENV_IDS:
+        spec = gym.spec(env_id)
+        assert isinstance(spec.entry_point, str) and isinstance(spec.vector_entry_point, str)
+        assert spec.max_episode_steps is not None
+
+
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_gymnasium_and_sb3_checkers_pass(env_id):
+    gym_check_env(gym.make(env_id).unwrapped, skip_render_check=True)
+    sb3_check_env(gym.make(env_id), warn=True)
+
+
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_make_with_module_prefix(env_id):
+    env = gym.make(f"continuum_gym:{env_id}")
+    obs, _ = env.reset(seed=1)
+    assert env.observation_space.contains(obs)
+
+
+def _rollout(env, seed, steps, actions):
+    obs, info = env.reset(seed=seed)
+    out = [obs]
+    for k in range(steps):
+        obs, reward, terminated, truncated, info = env.step(actions[k])
+        out.append(np.append(obs, [reward, terminated, truncated]))
+        if terminated or truncated:
+            obs, info = env.reset()
+            out.append(obs)
+    return out
+
+
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_same_seed_same_trajectory_and_copies(env_id):
+    rng = np.random.default_rng(0)
+    env = gym.make(env_id, max_episode_steps=40)
+    actions = rng.uniform(-1, 1, (100,) + env.action_space.shape)
+    first = _rollout(env, 3, 100, actions)
+    second = _rollout(gym.make(env_id, max_episode_steps=40), 3, 100, actions)
+    assert all(np.array_equal(a, b) for a, b in zip(first, second))
+    other = _rollout(gym.make(env_id, max_episode_steps=40), 4, 100, actions)
+    assert not all(np.array_equal(a, b) for a, b in zip(first, other))
+    # Pickled and deep-copied envs continue identically.
+    env.reset(seed=5)
+    env.step(actions[0])
+    clones = [copy.deepcopy(env), pickle.loads(pickle.dumps(env))]
+    for k in range(1, 10):
+        expected = env.step(actions[k])[0]
+        for clone in clones:
+            assert np.array_equal(clone.step(actions[k])[0], expected)
+
+
+@pytest.mark.parametrize("env_id, kwargs", [
+    (OCCLUSION, {"base_controller": None}),
+    (OCCLUSION, {"task": "random", "residual_space": "joint", "residual_scale": 1.0}),
+    (VIEW, {"base_controller": None}),
+    (VIEW, {"task": "random"}),
+])
+def test_observations_stay_in_their_space_under_extreme_actions(env_id, kwargs):
+    env = gym.make(env_id, **kwargs)
+    rng = np.random.default_rng(1)
+    obs, _ = env.reset(seed=0)
+    hit_limit = False
+    for k in range(600):
+        action = np.sign(rng.uniform(-1, 1, env.action_space.shape)) if k % 50 < 40 else np.zeros(env.action_space.shape)
+        if k % 100 < 10:  # push the first bend (and the stem) hard toward a limit
+            action[0] = -1.0 if env_id == OCCLUSION else 1.0
+            action[2] = 1.0
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        assert env.observation_space.contains(obs), (k, obs)
+        assert np.isfinite(reward)
+        hit_limit |= bool(np.any(info["clamped_joints"]))
+        if terminated or truncated:
+            obs, _ = env.reset()
+    if env_id == VIEW and kwargs.get("base_controller", "x") is None:
+        assert hit_limit  # the rollout did reach joint limits (occlusion: see the next test)
+
+
+def test_joint_limits_are_reached_and_reported():
+    env = OcclusionAvoidanceEnv(base_controller=None, task="hold")
+    env.reset(seed=0)
+    core = env.core
+    core.q[0, 0] = core.limits.lower[0] + 0.005  # bend of segment 1 just inside its limit
+    _, _, _, _, info = env.step(np.array([-1, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32))
+    assert info["clamped_joints"][0] and core.q[0, 0] == core.limits.lower[0]
+    assert not info["clamped_joints"][1:].any()
+
+
+def test_near_straight_configuration_is_handled():
+    env = OcclusionAvoidanceEnv(task="hold")
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    core.q[0] = [math.pi / 2, 0.3, math.pi / 2 + 1e-9, -0.2, math.pi / 2, 1.0, 0.01]
+    core.tasks.centre[0], core.tasks.R_des[0] = core.robot.forward_kinematics(core.q[0])
+    for _ in range(5):
+        obs, reward, *_ = env.step(np.zeros(8, dtype=np.float32))
+        assert env.observation_space.contains(obs) and np.isfinite(reward)
+
+
+# ---------------------------------------------------------------- zero residual == baseline
+@pytest.mark.parametrize("task", ["hold", "circle"])
+def test_zero_residual_reproduces_the_projected_gradient_exactly(task):
+    env = OcclusionAvoidanceEnv(task=task, task_split="test")
+    env.reset(seed=2)
+    core = env.core
+    q0, gamma0 = core.q[0].copy(), float(core.gamma[0])
+    steps = 60
+    qs, gammas = [q0.copy()], [gamma0]
+    for _ in range(steps):
+        env.step(np.zeros(8, dtype=np.float32))
+        qs.append(core.q[0].copy())
+        gammas.append(float(core.gamma[0]))
+    sub_dt = core.control_dt / core.substeps
+    times = np.array([k * core.control_dt + s * sub_dt for k in range(steps) for s in range(core.substeps)])
+    p = np.empty((1, len(times), 3))
+    v = np.empty((1, len(times), 3))
+    tasks = core.tasks
+    trajectory_batch(tasks.centre[:1], tasks.amp[:1], tasks.omega[:1], tasks.phase[:1], times, p, v)
+    R = np.broadcast_to(tasks.R_des[0], (len(times), 3, 3))
+    q_ref, g_ref = ProjectedGradient(limits=core.limits, cone=core.cone).rollout(q0, gamma0, p[0], R, v[0], dt=sub_dt)
+    assert np.array_equal(np.array(qs), q_ref[::core.substeps])
+    assert np.array_equal(np.array(gammas), g_ref[::core.substeps])
+
+
+def test_zero_residual_reproduces_dimension_reduced_exactly():
+    env = ViewTrackingEnv(task="case2", task_split="test")
+    env.reset(seed=0)
+    core = env.core
+    history = [core.q[0].copy()]
+    for _ in range(100):
+        env.step(np.zeros(6, dtype=np.float32))
+        history.append(core.q[0].copy())
+    target = core.davinci.target_pose(core.davinci_configuration(0))
+    solved = DimensionReduced().solve(history[0], target, max_steps=100, record=True)
+    n = int(solved["steps"]) + 1
+    assert n > 50
+    assert np.array_equal(np.array(history)[:n], solved["history"][:n])
+
+
+# ---------------------------------------------------------------- rewards and info
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_reward_is_the_sum_of_weighted_terms(env_id):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        _, reward, _, _, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+        assert reward == pytest.approx(sum(info["reward_terms"].values()), rel=1e-12, abs=1e-12)
+    # Doubling one weight doubles that term and nothing else.
+    name = "voi" if env_id == OCCLUSION else "overlap"
+    pair = [gym.make(env_id, reward_weights={name: w}) for w in (1.0, 2.0)]
+    infos = []
+    for e in pair:
+        e.reset(seed=0)
+        infos.append(e.step(np.zeros(e.action_space.shape, dtype=np.float32))[4])
+    assert infos[1]["reward_terms"][name] == pytest.approx(2 * infos[0]["reward_terms"][name])
+
+
+def test_occlusion_info_reports_metrics_and_saturation():
+    env = OcclusionAvoidanceEnv(base_controller=None, task="hold")
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.ones(8, dtype=np.float32) * 3.0)
+    assert info["action_clipped"]
+    for key in ("voi", "tip_error_m", "orientation_error_rad", "tip_view_fraction", "tip_in_view", "clamped_joints",
+                "rate_saturated", "gamma", "base_command"):
+        assert key in info
+    assert 0 <= info["voi"] <= 1 and info["clamped_joints"].shape == (7,)
+
+
+# ---------------------------------------------------------------- splits
+def test_train_and_test_tasks_are_disjoint():
+    train = hold_start_pool("train", math.pi / 2, (0.0, 0.04))
+    test = hold_start_pool("test", math.pi / 2, (0.0, 0.04))
+    distances = np.linalg.norm(train[:, None] - test[None], axis=-1)
+    assert distances.min() > 1e-6
+    a = ViewTrackingEnv(task="static", task_split="train")
+    b = ViewTrackingEnv(task="static", task_split="test")
+    a.reset(options={"task_id": 7})
+    b.reset(options={"task_id": 7})
+    assert not np.array_equal(a.core.tasks.centre, b.core.tasks.centre)
+
+
+# ---------------------------------------------------------------- bad input
+@pytest.mark.parametrize("env_id, kwargs, name", [
+    (OCCLUSION, {"task": "orbit"}, "task"),
+    (OCCLUSION, {"task": "circle", "task_split": "train"}, "circle"),
+    (OCCLUSION, {"task_split": "validation"}, "task_split"),
+    (OCCLUSION, {"base_controller": "dimension_reduced"}, "base_controller"),
+    (OCCLUSION, {"lens_model": "fisheye"}, "lens_model"),
+    (OCCLUSION, {"reward_weights": {"voi": -1.0}}, "reward_weights"),
+    (OCCLUSION, {"reward_weights": {"occlusion": 1.0}}, "reward_weights"),
+    (OCCLUSION, {"reward_weights": {"voi": "high"}}, "reward_weights"),
+    (OCCLUSION, {"residual_space": "task"}, "residual_space"),
+    (OCCLUSION, {"max_bend": -0.5}, "max_bend"),
+    (OCCLUSION, {"substeps": 0}, "substeps"),
+    (OCCLUSION, {"control_dt": 0.0}, "control_dt"),
+    (VIEW, {"task": "coverage"}, "coverage"),
+    (VIEW, {"base_controller": "projected_gradient"}, "base_controller"),
+    (VIEW, {"residual_scale": -0.1}, "residual_scale"),
+    (VIEW, {"rate_limits": [1, 1, 1]}, "rate_limits"),
+])
+def test_bad_keywords_raise(env_id, kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        gym.make(env_id, **kwargs)
+
+
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_bad_actions_raise(env_id):
+    env = gym.make(env_id).unwrapped
+    env.reset(seed=0)
+    dim = env.action_space.shape[0]
+    for bad in (np.full(dim, np.nan), np.full(dim, np.inf), np.zeros(dim + 1), np.zeros((2, dim))):
+        with pytest.raises(ValueError, match="action"):
+            env.step(bad)
+    before = env.core.obs.copy()
+    assert np.array_equal(before, env.core.obs)  # a rejected action leaves no trace
+
+
+# ---------------------------------------------------------------- vector envs
+@pytest.mark.parametrize("env_id, vector_class", [(OCCLUSION, OcclusionAvoidanceVectorEnv),
+                                                   (VIEW, ViewTrackingVectorEnv)])
+def test_native_vector_env_equals_single_envs(env_id, vector_class):
+    n = 4
+    venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", max_episode_steps=7)
+    assert isinstance(venv, vector_class)
+    singles = [gym.make(env_id, max_episode_steps=7) for _ in range(n)]
+    obs, _ = venv.reset(seed=10)
+    single_obs = [env.reset(seed=10 + i)[0] for i, env in enumerate(singles)]
+    assert np.array_equal(obs, np.array(single_obs))
+    rng = np.random.default_rng(3)
+    pending_reset = [False] * n
+    for _ in range(20):
+        actions = rng.uniform(-1, 1, (n,) + singles[0].action_space.shape).astype(np.float32)
+        obs, rewards, terminated, truncated, _ = venv.step(actions)
+        for i, env in enumerate(singles):
+            if pending_reset[i]:  # next-step autoreset: this step returns the reset observation
+                expected_obs, _ = env.reset()
+                assert np.array_equal(obs[i], expected_obs) and rewards[i] == 0.0
+                assert not terminated[i] and not truncated[i]
+                pending_reset[i] = False
+                continue
+            o, r, te, tr, _ = env.step(actions[i])
+            assert np.array_equal(obs[i], o) and rewards[i] == r and terminated[i] == te and truncated[i] == tr
+            pending_reset[i] = te or tr
+    assert venv.observation_space.shape == (n,) + singles[0].observation_space.shape
+
+
+def test_sb3_adapter_resets_in_the_same_step():
+    from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
+
+    venv = ContinuumSB3VecEnv(VIEW, 3, max_episode_steps=5)
+    venv.seed(0)
+    obs = venv.reset()
+    for k in range(5):
+        obs, rewards, dones, infos = venv.step(np.zeros((3, 6), dtype=np.float32))
+    assert dones.all()
+    assert all("terminal_observation" in info and info["TimeLimit.truncated"] for info in infos)
+    assert not np.array_equal(obs[0], infos[0]["terminal_observation"])
+    assert np.all(obs[:, 21] == 0.0)  # elapsed-time feature of a fresh episode
+    with pytest.raises(ValueError, match="unknown env"):
+        ContinuumSB3VecEnv("ContinuumGym/Nope-v0", 2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
+def test_short_ppo_run_trains_saves_and_loads(env_id, tmp_path):
+    from stable_baselines3 import PPO
+
+    from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
+
+    venv = ContinuumSB3VecEnv(env_id, 8, seed=0)
+    model = PPO("MlpPolicy", venv, n_steps=64, batch_size=128, n_epochs=2, seed=0, device="cpu")
+    model.learn(2048)
+    model.save(tmp_path / "model")
+    loaded = PPO.load(tmp_path / "model", device="cpu")
+    obs = venv.reset()
+    assert np.array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
