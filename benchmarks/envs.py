@@ -1,0 +1,128 @@
+"""Environment speed: single envs beside CartPole-v1, SyncVectorEnv beside the native vector env.
+
+    python benchmarks/envs.py [--json PATH] [--quick]
+
+JSON keys (steps per second): ``single.<id>``, ``cartpole``, ``sync64.<id>``, ``native.<id>.<N>``, plus
+``profile.<id>`` (microseconds per step spent in the compiled kernel, the core wrapper, the env API and
+Gymnasium's wrappers) and ``memory.native4096.<id>`` (MiB added by a 4096-robot vector env).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import sys
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import machine, peak_rss_mib, print_table, write_json  # noqa: E402
+
+import continuum_gym  # noqa: E402,F401
+
+
+def rate(step, seconds, warmup=20):
+    for _ in range(warmup):
+        step()
+    count = 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        step()
+        count += 1
+    return count / (time.perf_counter() - start)
+
+
+def single_env_rate(env_id, seconds):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    zero = 0 if isinstance(env.action_space, gym.spaces.Discrete) else np.zeros(env.action_space.shape, np.float32)
+
+    def step():
+        _, _, terminated, truncated, _ = env.step(zero)
+        if terminated or truncated:
+            env.reset()
+
+    return rate(step, seconds), env
+
+
+def vector_rate(venv, n, seconds):
+    venv.reset(seed=0)
+    zero = np.zeros((n,) + venv.single_action_space.shape, dtype=np.float32)
+    return rate(lambda: venv.step(zero), seconds) * n
+
+
+def rss_now_mib():
+    with open("/proc/self/statm") as handle:
+        return int(handle.read().split()[1]) * 4096 / 2**20
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", help="write results to this JSON file")
+    parser.add_argument("--quick", action="store_true", help="short timings (smoke test)")
+    args = parser.parse_args(argv)
+    seconds = 0.5 if args.quick else 3.0
+    results = {"machine": machine(), "unit": "environment steps per second"}
+    rows = []
+    cartpole, _ = single_env_rate("CartPole-v1", seconds)
+    results["cartpole"] = cartpole
+    rows.append(("CartPole-v1", "single", f"{cartpole:,.0f}", "1.00x"))
+    for env_id in continuum_gym.ENV_IDS:
+        single, env = single_env_rate(env_id, seconds)
+        results[f"single.{env_id}"] = single
+        rows.append((env_id, "single", f"{single:,.0f}", f"{single / cartpole:.2f}x CartPole"))
+        # Where one step goes.
+        core = env.unwrapped.core
+        action = np.zeros((1,) + env.action_space.shape)
+        active = np.ones(1, dtype=np.uint8)
+        env.reset(seed=0)
+        kernel = 1e6 / rate(lambda: core.step(action, active) if core.steps[0] < 50 else core.reset_rows(
+            np.array([0]), np.array([0])), seconds)
+        unwrapped = env.unwrapped
+        unwrapped.reset(seed=0)
+        zero = np.zeros(env.action_space.shape, dtype=np.float32)
+
+        def raw_step():
+            _, _, te, tr, _ = unwrapped.step(zero)
+            if te or tr:
+                unwrapped.reset()
+
+        api = 1e6 / rate(raw_step, seconds)
+        results[f"profile.{env_id}"] = {"core_step_us": kernel, "env_step_us": api, "wrapped_step_us": 1e6 / single,
+                                        "wrappers_us": 1e6 / single - api, "env_api_us": api - kernel}
+        sync = gym.make_vec(env_id, num_envs=64, vectorization_mode="sync")
+        sync_rate = vector_rate(sync, 64, seconds)
+        results[f"sync64.{env_id}"] = sync_rate
+        rows.append((env_id, "SyncVectorEnv N=64", f"{sync_rate:,.0f}", "1.00x sync"))
+        for n in (1, 64, 1024):
+            native = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point")
+            value = vector_rate(native, n, seconds)
+            results[f"native.{env_id}.{n}"] = value
+            rows.append((env_id, f"native N={n}", f"{value:,.0f}", f"{value / sync_rate:.2f}x sync"))
+        gc.collect()
+        before = rss_now_mib()
+        big = gym.make_vec(env_id, num_envs=4096, vectorization_mode="vector_entry_point")
+        big.reset(seed=0)
+        big.step(np.zeros((4096,) + big.single_action_space.shape, dtype=np.float32))
+        results[f"memory.native4096.{env_id}"] = rss_now_mib() - before
+        del big
+    print_table(rows, ["environment", "mode", "steps/s", "relative"])
+    for env_id in continuum_gym.ENV_IDS:
+        p = results[f"profile.{env_id}"]
+        print(f"{env_id}: one step {p['wrapped_step_us']:.0f} us = kernel+core {p['core_step_us']:.0f} us + env API "
+              f"{p['env_api_us']:.0f} us + Gymnasium wrappers {p['wrappers_us']:.0f} us; "
+              f"N=4096 vector env adds {results[f'memory.native4096.{env_id}']:.0f} MiB")
+    results["peak_rss_mib"] = peak_rss_mib()
+    print(f"peak RSS: {results['peak_rss_mib']:.0f} MiB")
+    if args.json:
+        write_json(args.json, results)
+        print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,158 @@
+"""Camera frames -> pybullet view/projection matrices, and the pixel rays of a pybullet image.
+
+Camera frame convention (OpenCV/ROS "optical" frame): position ``p`` (m) and rotation ``R`` (3x3, columns
+in {w}) with ``R[:, 2]`` the optical axis (looking direction), ``R[:, 0]`` image right and ``R[:, 1]``
+image *down*. pybullet's OpenGL-style matrices are built from it with ``computeViewMatrix(eye=p,
+target=p + R[:, 2], up=-R[:, 1])`` and ``computeProjectionMatrixFOV`` (vertical field of view in degrees).
+
+Pixel sampling of pybullet's TinyRenderer (examples/TinyRenderer/our_gl.cpp, TinyRendererVisualShapeConverter):
+the viewport maps NDC x in [-1, 1] to [0, W] and a pixel is covered when its *integer* position lies in a
+triangle, so column j samples x_ndc = 2 j / W - 1; the image is flipped vertically before it is returned,
+so row i (0 = top) samples y_ndc = 2 (H - 1 - i) / H - 1. ``pixel_rays`` uses exactly these samples.
+
+pybullet is imported lazily (inside the functions that need it).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "camera_matrices", "view_matrix", "projection_matrix", "view_matrix_from_frame", "look_at_frame",
+    "pixel_rays", "pixel_angles", "fov_mask", "quaternion_from_matrix",
+]
+
+
+def _as_frame(p, R):
+    p = np.asarray(p, dtype=np.float64).reshape(3)
+    R = np.asarray(R, dtype=np.float64).reshape(3, 3)
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
+        raise ValueError(f"camera frame must be finite; got p={p}, R={R}")
+    return p, R
+
+
+def view_matrix(p, R) -> tuple:
+    """pybullet view matrix (16 floats, column-major) of the camera frame (p, R) (module docstring)."""
+    import pybullet
+
+    p, R = _as_frame(p, R)
+    return pybullet.computeViewMatrix(
+        cameraEyePosition=p.tolist(), cameraTargetPosition=(p + R[:, 2]).tolist(), cameraUpVector=(-R[:, 1]).tolist())
+
+
+def projection_matrix(fov_y: float, aspect: float = 1.0, near: float = 1e-3, far: float = 0.3) -> tuple:
+    """pybullet projection matrix (16 floats) for a vertical field of view ``fov_y`` (rad), near/far in m."""
+    import pybullet
+
+    if not (0.0 < fov_y < math.pi):
+        raise ValueError(f"fov_y must be in (0, pi) rad; got {fov_y!r}")
+    if not (0.0 < near < far):
+        raise ValueError(f"need 0 < near < far (m); got near={near!r}, far={far!r}")
+    return pybullet.computeProjectionMatrixFOV(fov=math.degrees(fov_y), aspect=float(aspect), nearVal=float(near),
+                                               farVal=float(far))
+
+
+def camera_matrices(p, R, fov_y, width, height, near=1e-3, far=0.3):
+    """(view, projection) for getCameraImage: camera frame (p, R), vertical FOV ``fov_y`` (rad), image W x H."""
+    return view_matrix(p, R), projection_matrix(fov_y, width / height, near, far)
+
+
+def view_matrix_from_frame(p, R) -> np.ndarray:
+    """The same view matrix as ``view_matrix`` in numpy, (4, 4) row-major (``.T.ravel()`` is pybullet's layout).
+
+    Rows are the OpenGL eye axes in {w}: x = R[:, 0], y (up) = -R[:, 1], z (backward) = -R[:, 2].
+    """
+    p, R = _as_frame(p, R)
+    axes = np.stack([R[:, 0], -R[:, 1], -R[:, 2]])
+    V = np.eye(4)
+    V[:3, :3] = axes
+    V[:3, 3] = -axes @ p
+    return V
+
+
+def look_at_frame(eye, target, up=(0.0, 0.0, 1.0)):
+    """Camera frame (p, R) at ``eye`` looking at ``target`` with image-up as close to ``up`` as possible."""
+    eye = np.asarray(eye, dtype=np.float64).reshape(3)
+    z = np.asarray(target, dtype=np.float64).reshape(3) - eye
+    n = np.linalg.norm(z)
+    if n < 1e-12:
+        raise ValueError("eye and target coincide")
+    z /= n
+    up = np.asarray(up, dtype=np.float64).reshape(3)
+    x = np.cross(z, up)  # image right = forward x up
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)  # image down
+    return eye, np.column_stack([x, y, z])
+
+
+def pixel_rays(width: int, height: int, fov_y: float) -> np.ndarray:
+    """Unnormalised ray directions (H, W, 3) in the camera frame of every pixel sample (x right, y down, z = 1)."""
+    t = math.tan(0.5 * fov_y)
+    x_ndc = 2.0 * np.arange(width) / width - 1.0
+    y_ndc = 2.0 * (height - 1 - np.arange(height)) / height - 1.0
+    rays = np.empty((height, width, 3))
+    rays[..., 0] = (x_ndc * t * width / height)[None, :]
+    rays[..., 1] = (-y_ndc * t)[:, None]
+    rays[..., 2] = 1.0
+    return rays
+
+
+def pixel_angles(width: int, height: int, fov_y: float) -> np.ndarray:
+    """Angle (rad, (H, W)) between each pixel's ray and the optical axis."""
+    rays = pixel_rays(width, height, fov_y)
+    return np.arctan(np.hypot(rays[..., 0], rays[..., 1]))
+
+
+_FOV_MASKS: dict = {}
+
+
+def fov_mask(width: int, height: int, fov_y: float, half_angle: float) -> np.ndarray:
+    """Boolean (H, W): pixels whose ray is within ``half_angle`` (rad) of the optical axis (cached, read-only)."""
+    key = (int(width), int(height), float(fov_y), float(half_angle))
+    mask = _FOV_MASKS.get(key)
+    if mask is None:
+        mask = pixel_angles(width, height, fov_y) <= half_angle
+        mask.flags.writeable = False
+        if len(_FOV_MASKS) > 64:
+            _FOV_MASKS.clear()
+        _FOV_MASKS[key] = mask
+    return mask
+
+
+def quaternion_from_matrix(R) -> np.ndarray:
+    """pybullet quaternion [x, y, z, w] of rotation matrices R (..., 3, 3) (Shepperd's method)."""
+    R = np.asarray(R, dtype=np.float64)
+    batch = R.shape[:-2]
+    R = R.reshape(-1, 3, 3)
+    m00, m11, m22 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    trace = m00 + m11 + m22
+    cand = np.stack([trace, m00, m11, m22], axis=-1)
+    k = np.argmax(cand, axis=-1)
+    q = np.empty((R.shape[0], 4))
+    for case in range(4):
+        sel = k == case
+        if not np.any(sel):
+            continue
+        r = R[sel]
+        if case == 0:
+            s = np.sqrt(1.0 + trace[sel]) * 2.0
+            q[sel] = np.stack([(r[:, 2, 1] - r[:, 1, 2]) / s, (r[:, 0, 2] - r[:, 2, 0]) / s,
+                               (r[:, 1, 0] - r[:, 0, 1]) / s, 0.25 * s], axis=-1)
+        elif case == 1:
+            s = np.sqrt(1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2]) * 2.0
+            q[sel] = np.stack([0.25 * s, (r[:, 0, 1] + r[:, 1, 0]) / s, (r[:, 0, 2] + r[:, 2, 0]) / s,
+                               (r[:, 2, 1] - r[:, 1, 2]) / s], axis=-1)
+        elif case == 2:
+            s = np.sqrt(1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2]) * 2.0
+            q[sel] = np.stack([(r[:, 0, 1] + r[:, 1, 0]) / s, 0.25 * s, (r[:, 1, 2] + r[:, 2, 1]) / s,
+                               (r[:, 0, 2] - r[:, 2, 0]) / s], axis=-1)
+        else:
+            s = np.sqrt(1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1]) * 2.0
+            q[sel] = np.stack([(r[:, 0, 2] + r[:, 2, 0]) / s, (r[:, 1, 2] + r[:, 2, 1]) / s, 0.25 * s,
+                               (r[:, 1, 0] - r[:, 0, 1]) / s], axis=-1)
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return q.reshape(batch + (4,))
