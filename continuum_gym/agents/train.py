@@ -31,7 +31,7 @@ BASES = {
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # Keys of a hyperparameter block that are not arguments of the SB3 algorithm.
 RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
-            "checkpoint_freq", "policy", "action_noise_std")
+            "checkpoint_freq", "policy", "action_noise_std", "normalize_reward")
 EVAL_TASK_OFFSET = 0
 
 
@@ -106,6 +106,11 @@ class AtomicCheckpoint:
                     tmp = folder / ".replay_buffer.tmp.pkl"
                     self.model.save_replay_buffer(tmp)
                     os.replace(tmp, folder / "replay_buffer.pkl")
+                normalizer = self.model.get_vec_normalize_env()
+                if normalizer is not None:
+                    tmp = folder / ".vecnormalize.tmp.pkl"
+                    normalizer.save(str(tmp))
+                    os.replace(tmp, folder / "vecnormalize.pkl")
                 save_model_atomic(self.model, folder / "latest.zip")
                 write_text_atomic(folder / "state.json", json.dumps({"num_timesteps": int(self.num_timesteps),
                                                                      "time": time.time()}))
@@ -167,12 +172,16 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-    from stable_baselines3.common.vec_env import VecMonitor
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from continuum_gym.agents.residual import ActorBurnIn, zero_init_residual
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
 
+    import numba
+
+    # Runs are parallelised by process (--parallel); one thread each keeps them from fighting.
     torch.set_num_threads(1)
+    numba.set_num_threads(1)
     hp = load_hyperparams(algo, env_id, hyperparams)
     total = int(float(steps if steps is not None else hp["n_timesteps"]))
     run_dir = Path(out) / run_name(env_id, algo, base, seed)
@@ -187,6 +196,14 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
     n = int(n_envs or hp.get("n_envs", 16))
     venv = VecMonitor(ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs))
     venv.seed(seed)
+    normalizer_path = run_dir / "checkpoints" / "vecnormalize.pkl"
+    if hp.get("normalize_reward", False):
+        # Returns of long episodes reach the hundreds; the critic learns scaled returns. Observations are
+        # already normalised by the environment, and the policy never needs these statistics at test time.
+        if resume and normalizer_path.exists():
+            venv = VecNormalize.load(str(normalizer_path), venv)
+        else:
+            venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=float(hp.get("gamma", 0.99)))
     algo_kwargs = {k: v for k, v in hp.items() if k not in RUN_KEYS}
     if algo == "td3" and hp.get("action_noise_std"):
         dim = venv.action_space.shape[0]

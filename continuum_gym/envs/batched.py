@@ -78,6 +78,20 @@ def validate_weights(weights, defaults: dict) -> dict:
     return merged
 
 
+#: Batches at least this large are stepped on all cores (rows are independent, results identical).
+PARALLEL_MIN_ROWS = 32
+
+
+def parallel_chunks(num_envs: int) -> int:
+    """Number of row chunks for the threaded kernels (1 = serial)."""
+    import numba
+
+    threads = numba.get_num_threads()
+    if num_envs < PARALLEL_MIN_ROWS or threads < 2:
+        return 1
+    return min(num_envs, 4 * threads)
+
+
 def choose(value, valid, name):
     if value not in valid:
         raise ValueError(f"{name} must be one of {list(valid)}; got {value!r}")

@@ -16,6 +16,7 @@ from continuum_gym.envs.batched import (
     ContinuumEnv,
     ContinuumVectorEnv,
     choose,
+    parallel_chunks,
     validate_weights,
 )
 from continuum_gym.envs.occlusion_kernel import (
@@ -25,6 +26,7 @@ from continuum_gym.envs.occlusion_kernel import (
     REWARD_TERMS,
     occlusion_observe_batch,
     occlusion_step_batch,
+    occlusion_step_batch_parallel,
 )
 from continuum_gym.envs.tasks import (
     OCCLUSION_TASKS,
@@ -88,6 +90,7 @@ class OcclusionCore(BatchedCore):
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
+        self.n_chunks = parallel_chunks(n)
         self.flags = np.zeros((n, 7), dtype=np.int64)
         self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
                                      self.limits.max_bend, self.limits.insertion)
@@ -129,7 +132,11 @@ class OcclusionCore(BatchedCore):
                 self.base_controller is not None)
 
     def step(self, actions, active):
-        occlusion_step_batch(self.q, self.gamma, self.steps, actions, active, *self._step_args)
+        if self.n_chunks > 1:
+            occlusion_step_batch_parallel(self.q, self.gamma, self.steps, actions, active, *self._step_args,
+                                          self.n_chunks)
+        else:
+            occlusion_step_batch(self.q, self.gamma, self.steps, actions, active, *self._step_args)
         return self.rewards, self.flags[:, 3] != 0, self.flags[:, 4] != 0
 
     # ------------------------------------------------------------------ info

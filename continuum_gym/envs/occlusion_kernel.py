@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from continuum_gym.baselines.occlusion import make_scratch, occlusion_rates_kernel, tracking_twist, wrap_angle
 from continuum_gym.geometry.lens_cone import cone_distance_slant, to_lens
@@ -158,116 +158,147 @@ def occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration,
 
 
 @njit(cache=True)
+def make_step_work(n_points):
+    """Per-thread scratch of ``occlusion_step_row``."""
+    return (make_workspace(), make_scratch(n_points), np.empty(DOF), np.empty(DOF), np.empty(DOF), np.empty(DOF),
+            np.empty(3), np.empty(3), np.empty((6, 6)), np.empty((6, 2)))
+
+
+@njit(cache=True)
+def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit, control_dt,
+                       substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
+                       rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend, weights,
+                       visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags, work):
+    """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
+
+    flags[i] = [clamped_bits, rate_saturated, gamma_saturated, terminated, truncated, base_frozen_bits,
+    base_rate_saturated] (the base bits OR-ed over the substeps). base_cmd holds the baseline command
+    at the current state on entry (cached from the last observe) and at the new state on exit.
+    """
+    ws, scratch, qdot, residual, projected, cmd, p_des, v_des, A, B = work
+    dt = control_dt / substeps
+    q = Q[i]
+    clamped = 0
+    rate_saturated = 0
+    gamma_saturated = 0
+    base_frozen = base_info[i, 0]
+    base_saturated = base_info[i, 1]
+    action_sq = 0.0
+    for k in range(DOF + 1):
+        action_sq += actions[i, k] * actions[i, k]
+    for k in range(DOF):
+        residual[k] = actions[i, k] * residual_scale * rate_scale_vec[k]
+    gamma_residual = actions[i, DOF] * residual_scale * rate_scale_vec[DOF]
+    for s in range(substeps):
+        t = step[i] * control_dt + s * dt
+        if s == 0:
+            for k in range(DOF):
+                qdot[k] = base_cmd[i, k]
+            gd = base_cmd[i, DOF]
+            if has_base and nullspace:
+                tip_kernel(q, lengths, ws, scratch[0], scratch[1], scratch[2])
+        elif has_base:
+            trajectory_point(centre[i], amp[i], omega[i], phase[i], t, p_des, v_des)
+            gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, R_des[i], v_des, dt, lengths,
+                                                            stiffness, segments, fractions, prm, ws, scratch, qdot)
+            base_frozen |= frozen
+            if base_scale < 1.0:
+                base_saturated = 1
+        else:
+            for k in range(DOF):
+                qdot[k] = 0.0
+            gd = 0.0
+        if has_base and nullspace:
+            _project_nullspace(scratch[2], residual, A, B, projected)
+        else:
+            for k in range(DOF):
+                projected[k] = residual[k]
+        # Uniform scaling keeps the command's direction; a baseline command already at its limit
+        # (within rounding) is left exactly as it is, so a zero residual reproduces the baseline.
+        scale = 1.0
+        for k in range(DOF):
+            cmd[k] = qdot[k] + projected[k]
+            if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+                scale = rate_limit[k] / abs(cmd[k])
+        if scale < 1.0:
+            rate_saturated = 1
+        for k in range(DOF):
+            value = q[k] + scale * cmd[k] * dt
+            if value > upper[k]:
+                value = upper[k]
+                clamped |= 1 << k
+            elif value < lower[k]:
+                value = lower[k]
+                clamped |= 1 << k
+            q[k] = value
+        g_rate = gd + gamma_residual
+        if g_rate > gamma_rate_limit:
+            g_rate = gamma_rate_limit
+            gamma_saturated = 1
+        elif g_rate < -gamma_rate_limit:
+            g_rate = -gamma_rate_limit
+            gamma_saturated = 1
+        G[i] = wrap_angle(G[i] + g_rate * dt)
+    step[i] += 1
+    occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration, control_dt, dt, lengths,
+                      stiffness, segments, fractions, prm, has_base, lower, upper, max_bend, rate_scale_vec,
+                      ws, scratch, base_cmd, base_info, obs, metrics)
+    voi = metrics[i, 0]
+    over = metrics[i, 3] - visibility_fraction
+    terms[i, 0] = -weights[0] * voi
+    terms[i, 1] = -weights[1] * metrics[i, 1] / 0.001
+    terms[i, 2] = -weights[2] * metrics[i, 2] / 0.01
+    terms[i, 3] = -weights[3] * (over / (1.0 - visibility_fraction) if over > 0.0 else 0.0)
+    terms[i, 4] = -weights[4] * action_sq / (DOF + 1)
+    total = 0.0
+    for k in range(N_TERMS_REWARD):
+        total += terms[i, k]
+    rewards[i] = total
+    flags[i, 0] = clamped
+    flags[i, 1] = rate_saturated
+    flags[i, 2] = gamma_saturated
+    flags[i, 3] = 1 if (metrics[i, 1] > MAX_TIP_ERROR or not math.isfinite(metrics[i, 1])) else 0
+    flags[i, 4] = 1 if step[i] >= limit[i] else 0
+    flags[i, 5] = base_frozen
+    flags[i, 6] = base_saturated
+
+
+@njit(cache=True)
 def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, limit, control_dt,
                          substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
                          rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend, weights,
                          visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags):
-    """Advance every row by one control step; fills obs, metrics, reward terms, rewards and flags.
+    """Advance every active row by one control step (serial)."""
+    work = make_step_work(segments.shape[0])
+    for i in range(Q.shape[0]):
+        if active[i] != 0:
+            occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit, control_dt,
+                               substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace,
+                               residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend,
+                               weights, visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags,
+                               work)
 
-    flags[i] = [clamped_bits, rate_saturated, gamma_saturated, terminated, truncated, base_frozen_bits,
-    base_rate_saturated] (the base bits OR-ed over the substeps).
-    base_cmd holds the baseline command at the current state on entry (cached from the last observe)
-    and at the new state on exit.
+
+@njit(cache=True, parallel=True)
+def occlusion_step_batch_parallel(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, limit,
+                                  control_dt, substeps, lengths, stiffness, segments, fractions, prm, has_base,
+                                  nullspace, residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper,
+                                  max_bend, weights, visibility_fraction, base_cmd, base_info, obs, metrics, terms,
+                                  rewards, flags, n_chunks):
+    """As ``occlusion_step_batch``, rows split into ``n_chunks`` contiguous chunks over threads.
+
+    Rows are independent and each is computed by the same row function, so results equal the serial ones.
     """
     n = Q.shape[0]
-    ws = make_workspace()
-    scratch = make_scratch(segments.shape[0])
-    dt = control_dt / substeps
-    qdot = np.empty(DOF)
-    residual = np.empty(DOF)
-    projected = np.empty(DOF)
-    cmd = np.empty(DOF)
-    p_des = np.empty(3)
-    v_des = np.empty(3)
-    A = np.empty((6, 6))
-    B = np.empty((6, 2))
-    for i in range(n):
-        if active[i] == 0:
-            continue
-        q = Q[i]
-        clamped = 0
-        rate_saturated = 0
-        gamma_saturated = 0
-        base_frozen = base_info[i, 0]
-        base_saturated = base_info[i, 1]
-        action_sq = 0.0
-        for k in range(DOF + 1):
-            action_sq += actions[i, k] * actions[i, k]
-        for k in range(DOF):
-            residual[k] = actions[i, k] * residual_scale * rate_scale_vec[k]
-        gamma_residual = actions[i, DOF] * residual_scale * rate_scale_vec[DOF]
-        for s in range(substeps):
-            t = step[i] * control_dt + s * dt
-            if s == 0:
-                for k in range(DOF):
-                    qdot[k] = base_cmd[i, k]
-                gd = base_cmd[i, DOF]
-                if has_base and nullspace:
-                    tip_kernel(q, lengths, ws, scratch[0], scratch[1], scratch[2])
-            elif has_base:
-                trajectory_point(centre[i], amp[i], omega[i], phase[i], t, p_des, v_des)
-                gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, R_des[i], v_des, dt, lengths,
-                                                                stiffness, segments, fractions, prm, ws, scratch, qdot)
-                base_frozen |= frozen
-                if base_scale < 1.0:
-                    base_saturated = 1
-            else:
-                for k in range(DOF):
-                    qdot[k] = 0.0
-                gd = 0.0
-            if has_base and nullspace:
-                _project_nullspace(scratch[2], residual, A, B, projected)
-            else:
-                for k in range(DOF):
-                    projected[k] = residual[k]
-            # Uniform scaling keeps the command's direction; a baseline command already at its limit
-            # (within rounding) is left exactly as it is, so a zero residual reproduces the baseline.
-            scale = 1.0
-            for k in range(DOF):
-                cmd[k] = qdot[k] + projected[k]
-                if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
-                    scale = rate_limit[k] / abs(cmd[k])
-            if scale < 1.0:
-                rate_saturated = 1
-            for k in range(DOF):
-                value = q[k] + scale * cmd[k] * dt
-                if value > upper[k]:
-                    value = upper[k]
-                    clamped |= 1 << k
-                elif value < lower[k]:
-                    value = lower[k]
-                    clamped |= 1 << k
-                q[k] = value
-            g_rate = gd + gamma_residual
-            if g_rate > gamma_rate_limit:
-                g_rate = gamma_rate_limit
-                gamma_saturated = 1
-            elif g_rate < -gamma_rate_limit:
-                g_rate = -gamma_rate_limit
-                gamma_saturated = 1
-            G[i] = wrap_angle(G[i] + g_rate * dt)
-        step[i] += 1
-        occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration, control_dt, dt, lengths,
-                          stiffness, segments, fractions, prm, has_base, lower, upper, max_bend, rate_scale_vec,
-                          ws, scratch, base_cmd, base_info, obs, metrics)
-        voi = metrics[i, 0]
-        over = metrics[i, 3] - visibility_fraction
-        terms[i, 0] = -weights[0] * voi
-        terms[i, 1] = -weights[1] * metrics[i, 1] / 0.001
-        terms[i, 2] = -weights[2] * metrics[i, 2] / 0.01
-        terms[i, 3] = -weights[3] * (over / (1.0 - visibility_fraction) if over > 0.0 else 0.0)
-        terms[i, 4] = -weights[4] * action_sq / (DOF + 1)
-        total = 0.0
-        for k in range(N_TERMS_REWARD):
-            total += terms[i, k]
-        rewards[i] = total
-        flags[i, 0] = clamped
-        flags[i, 1] = rate_saturated
-        flags[i, 2] = gamma_saturated
-        flags[i, 3] = 1 if (metrics[i, 1] > MAX_TIP_ERROR or not math.isfinite(metrics[i, 1])) else 0
-        flags[i, 4] = 1 if step[i] >= limit[i] else 0
-        flags[i, 5] = base_frozen
-        flags[i, 6] = base_saturated
+    for chunk in prange(n_chunks):
+        work = make_step_work(segments.shape[0])
+        for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            if active[i] != 0:
+                occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit,
+                                   control_dt, substeps, lengths, stiffness, segments, fractions, prm, has_base,
+                                   nullspace, residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower,
+                                   upper, max_bend, weights, visibility_fraction, base_cmd, base_info, obs, metrics,
+                                   terms, rewards, flags, work)
 
 
 @njit(cache=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from continuum_gym.baselines.view_tracking import integrate_view_step, make_view_scratch, view_errors, view_rates_kernel
 from continuum_gym.envs.occlusion_kernel import trajectory_point
@@ -104,48 +104,76 @@ def view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, ge
 
 
 @njit(cache=True)
-def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom, prm, has_base,
-                    residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far,
-                    weights, base_cmd, obs, metrics, terms, rewards, flags):
-    """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for every active row.
+def make_view_step_work():
+    return make_view_scratch(), np.empty(6), np.empty(6)
+
+
+@njit(cache=True)
+def view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm, has_base,
+                  residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far,
+                  weights, base_cmd, obs, metrics, terms, rewards, flags, work):
+    """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for row i.
 
     flags[i] = [clamped_bits, rate_saturated, terminated, truncated].
     """
-    scratch = make_view_scratch()
-    cmd = np.empty(6)
-    q_new = np.empty(6)
+    scratch, cmd, q_new = work
+    q = Q[i]
+    action_sq = 0.0
+    scale = 1.0
+    for k in range(6):
+        action_sq += actions[i, k] * actions[i, k]
+        cmd[k] = base_cmd[i, k] + actions[i, k] * residual_scale * action_scale[k]
+        if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+            scale = rate_limit[k] / abs(cmd[k])
+    if scale < 1.0:
+        for k in range(6):
+            cmd[k] *= scale
+    clamped = integrate_view_step(q, cmd, control_dt, prm.lower, prm.upper, q_new)
+    for k in range(6):
+        q[k] = q_new[k]
+    step[i] += 1
+    view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, geom, prm, has_base, dv_alpha,
+                 dv_Le, dv_lower, dv_upper, action_scale, tan_half, near, far, scratch, base_cmd, obs, metrics)
+    terms[i, 0] = weights[0] * metrics[i, 0]
+    terms[i, 1] = -weights[1] * metrics[i, 1] / 0.01
+    terms[i, 2] = -weights[2] * metrics[i, 2]
+    terms[i, 3] = -weights[3] * action_sq / 6.0
+    total = 0.0
+    for k in range(N_REWARD_TERMS):
+        total += terms[i, k]
+    rewards[i] = total
+    flags[i, 0] = clamped
+    flags[i, 1] = 1 if scale < 1.0 else 0
+    flags[i, 2] = 0 if math.isfinite(metrics[i, 1]) else 1
+    flags[i, 3] = 1 if step[i] >= limit[i] else 0
+
+
+@njit(cache=True)
+def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
+                    has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half,
+                    near, far, weights, base_cmd, obs, metrics, terms, rewards, flags):
+    work = make_view_step_work()
     for i in range(Q.shape[0]):
-        if active[i] == 0:
-            continue
-        q = Q[i]
-        action_sq = 0.0
-        scale = 1.0
-        for k in range(6):
-            action_sq += actions[i, k] * actions[i, k]
-            cmd[k] = base_cmd[i, k] + actions[i, k] * residual_scale * action_scale[k]
-            if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
-                scale = rate_limit[k] / abs(cmd[k])
-        if scale < 1.0:
-            for k in range(6):
-                cmd[k] *= scale
-        clamped = integrate_view_step(q, cmd, control_dt, prm.lower, prm.upper, q_new)
-        for k in range(6):
-            q[k] = q_new[k]
-        step[i] += 1
-        view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, geom, prm, has_base, dv_alpha,
-                     dv_Le, dv_lower, dv_upper, action_scale, tan_half, near, far, scratch, base_cmd, obs, metrics)
-        terms[i, 0] = weights[0] * metrics[i, 0]
-        terms[i, 1] = -weights[1] * metrics[i, 1] / 0.01
-        terms[i, 2] = -weights[2] * metrics[i, 2]
-        terms[i, 3] = -weights[3] * action_sq / 6.0
-        total = 0.0
-        for k in range(N_REWARD_TERMS):
-            total += terms[i, k]
-        rewards[i] = total
-        flags[i, 0] = clamped
-        flags[i, 1] = 1 if scale < 1.0 else 0
-        flags[i, 2] = 0 if math.isfinite(metrics[i, 1]) else 1
-        flags[i, 3] = 1 if step[i] >= limit[i] else 0
+        if active[i] != 0:
+            view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
+                          has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper,
+                          tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags, work)
+
+
+@njit(cache=True, parallel=True)
+def view_step_batch_parallel(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom,
+                             prm, has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower,
+                             dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags,
+                             n_chunks):
+    n = Q.shape[0]
+    for chunk in prange(n_chunks):
+        work = make_view_step_work()
+        for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
+            if active[i] != 0:
+                view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
+                              has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower,
+                              dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags,
+                              work)
 
 
 @njit(cache=True)

@@ -15,6 +15,7 @@ from continuum_gym.envs.batched import (
     ContinuumEnv,
     ContinuumVectorEnv,
     choose,
+    parallel_chunks,
     validate_weights,
 )
 from continuum_gym.envs.tasks import DAVINCI_LOWER, DAVINCI_UPPER, VIEW_TASKS, view_task_count, view_tasks
@@ -25,6 +26,7 @@ from continuum_gym.envs.view_kernel import (
     REWARD_TERMS,
     view_observe_batch,
     view_step_batch,
+    view_step_batch_parallel,
 )
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import DaVinciEndoscope
@@ -89,6 +91,7 @@ class ViewTrackingCore(BatchedCore):
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
+        self.n_chunks = parallel_chunks(n)
         self.flags = np.zeros((n, 4), dtype=np.int64)
         self.tasks = view_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt, self.grid)
         self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
@@ -124,7 +127,10 @@ class ViewTrackingCore(BatchedCore):
                            self.base_cmd, self.obs, self.metrics)
 
     def step(self, actions, active):
-        view_step_batch(self.q, self.steps, actions, active, *self._step_args)
+        if self.n_chunks > 1:
+            view_step_batch_parallel(self.q, self.steps, actions, active, *self._step_args, self.n_chunks)
+        else:
+            view_step_batch(self.q, self.steps, actions, active, *self._step_args)
         return self.rewards, self.flags[:, 2] != 0, self.flags[:, 3] != 0
 
     def info(self):
