@@ -37,7 +37,9 @@ from continuum_gym.envs.tasks import (
 from continuum_gym.geometry.lens_cone import LENS_MODELS, LensCone
 from continuum_gym.robots.validation import positive
 
-DEFAULT_WEIGHTS = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 1.0, "action": 0.01}
+# Visibility is weighted so that leaving 0.7 of the half-angle costs more than any VOI it could save:
+# otherwise occlusion is "solved" by looking away from the tip.
+DEFAULT_WEIGHTS = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0, "action": 0.01}
 RESIDUAL_SPACES = ("nullspace", "joint")
 
 
@@ -256,7 +258,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     ``voi`` = -w VOI; ``tip_position`` = -w |e_p| / 1 mm; ``tip_orientation`` = -w |e_R| / 0.01 rad;
     ``visibility`` = -w max(0, f - 0.7)/0.3 with f the tip's angle from the view axis over the cone
     half-angle (looking away from the robot is not a way to avoid occlusion); ``action`` = -w mean(a^2).
-    Defaults: voi 1.0, tip_position 0.05, tip_orientation 0.05, visibility 1.0, action 0.01.
+    Defaults: voi 1.0, tip_position 0.05, tip_orientation 0.05, visibility 10.0, action 0.01.
 
     ## Starting State
     ``hold`` and ``random``: paper-like configurations (VOI 0.2-0.3 at gamma = 0, tip within 0.7 of the
@@ -265,11 +267,11 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
 
     ## Episode End
     ``terminated`` when the tip is more than 10 mm from its desired position (the tip is lost);
-    ``truncated`` at the task's duration (hold 1.5 s, random 5 s, circle 10 s).
+    ``truncated`` at the task's duration (hold 1.5 s, random 5 s, circle 10 s; mixed: its instance's).
 
     ## Arguments
-    - ``task``: ``"hold"`` (default), ``"random"`` (smooth random tip trajectories, <= 12 mm), ``"circle"``
-      (the paper's, test split only).
+    - ``task``: ``"hold"`` (default), ``"random"`` (smooth random tip trajectories, <= 12 mm), ``"mixed"``
+      (even task ids hold, odd ids random), ``"circle"`` (the paper's, test split only).
     - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
     - ``base_controller``: ``"projected_gradient"`` (default), ``"minimum_norm"`` or ``None``.
     - ``residual_scale`` (0.3), ``residual_space`` (``"nullspace"``), ``reward_weights``.

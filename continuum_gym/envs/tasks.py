@@ -59,7 +59,7 @@ def _empty_batch(n, dof, dim):
 
 
 # ---------------------------------------------------------------------- occlusion avoidance
-OCCLUSION_TASKS = ("hold", "circle", "random")
+OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
 OCCLUSION_DURATION_S = {"hold": 1.5, "circle": 10.0, "random": 5.0}
 
 
@@ -106,6 +106,16 @@ def occlusion_tasks(task: str, split: str, task_ids, control_dt: float, max_bend
     robot = MultiBackboneRobot()
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
     n = len(task_ids)
+    if task == "mixed":  # even ids hold a pose, odd ids follow a random trajectory
+        batch = _empty_batch(n, 7, 3)
+        for parity, name in ((0, "hold"), (1, "random")):
+            rows = np.flatnonzero(task_ids % 2 == parity)
+            if len(rows):
+                part = occlusion_tasks(name, split, task_ids[rows] // 2, control_dt, max_bend, insertion)
+                for field in vars(batch):
+                    getattr(batch, field)[rows] = getattr(part, field)
+        batch.task_id = task_ids.copy()
+        return batch
     batch = _empty_batch(n, 7, 3)
     batch.task_id = task_ids.copy()
     batch.duration[:] = int(round(OCCLUSION_DURATION_S[task] / control_dt))
@@ -149,7 +159,7 @@ def occlusion_task_count(task: str, split: str) -> int:
     """Number of distinct instances (ids beyond it wrap around the start pool)."""
     if task == "circle":
         return 1
-    return HOLD_POOL_SIZE[split] if task == "hold" else 10**9
+    return HOLD_POOL_SIZE[split] if task == "hold" else 10**9  # random, mixed: fresh trajectories per id
 
 
 # ---------------------------------------------------------------------- view tracking
