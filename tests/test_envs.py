@@ -301,3 +301,18 @@ def test_short_ppo_run_trains_saves_and_loads(env_id, tmp_path):
     loaded = PPO.load(tmp_path / "model", device="cpu")
     obs = venv.reset()
     assert np.array_equal(model.predict(obs, deterministic=True)[0], loaded.predict(obs, deterministic=True)[0])
+
+
+@pytest.mark.slow
+def test_rl_zoo_trains_with_the_shipped_yaml(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("rl_zoo3")
+    conf = Path(continuum_gym.__file__).parent / "agents" / "hyperparams" / "zoo_ppo.yml"
+    result = subprocess.run([sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", VIEW, "--gym-packages",
+                             "continuum_gym", "--conf-file", str(conf), "-n", "2048", "--log-folder", str(tmp_path),
+                             "--eval-freq", "-1"], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert list(tmp_path.glob("ppo/ContinuumGym-ViewTracking-v0_1/*.zip"))
