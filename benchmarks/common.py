@@ -38,3 +38,13 @@ def print_table(rows, headers) -> None:
     print("-|-".join("-" * w for w in widths))
     for row in rows:
         print(" | ".join(str(c).ljust(w) for c, w in zip(row, widths)))
+
+
+def finish(results: dict, json_path) -> int:
+    """Report peak RSS, write the JSON (atomically) if asked; the common tail of every benchmark."""
+    results["peak_rss_mib"] = peak_rss_mib()
+    print(f"peak RSS: {results['peak_rss_mib']:.0f} MiB")
+    if json_path:
+        write_json(json_path, results)
+        print(f"wrote {json_path}")
+    return 0

@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import machine, peak_rss_mib, print_table, write_json  # noqa: E402
+from common import finish, machine, print_table  # noqa: E402
 
 import continuum_gym  # noqa: E402,F401
 
@@ -116,12 +116,7 @@ def main(argv=None) -> int:
         print(f"{env_id}: one step {p['wrapped_step_us']:.0f} us = kernel+core {p['core_step_us']:.0f} us + env API "
               f"{p['env_api_us']:.0f} us + Gymnasium wrappers {p['wrappers_us']:.0f} us; "
               f"N=4096 vector env adds {results[f'memory.native4096.{env_id}']:.0f} MiB")
-    results["peak_rss_mib"] = peak_rss_mib()
-    print(f"peak RSS: {results['peak_rss_mib']:.0f} MiB")
-    if args.json:
-        write_json(args.json, results)
-        print(f"wrote {args.json}")
-    return 0
+    return finish(results, args.json)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import best_seconds, machine, peak_rss_mib, print_table, write_json  # noqa: E402
+from common import best_seconds, finish, machine, print_table  # noqa: E402
 from numpy_reference_endoscope import endoscope_fk_jacobian_numpy  # noqa: E402
 from numpy_reference_mbcr import fk_jacobian_numpy, potential_gradient_numpy, voi_numpy  # noqa: E402
 from numpy_reference_overlap import overlap_ratio_numpy  # noqa: E402
@@ -100,12 +100,7 @@ def main(argv=None) -> int:
            best_seconds(lambda: overlap_ratio_reference(p_a, R_a, p_b, R_b), n(50)), "scipy HalfspaceIntersection")
 
     print_table(rows, ["operation", "time", "per second", "reference", "ratio", "reference is"])
-    results["peak_rss_mib"] = peak_rss_mib()
-    print(f"peak RSS: {results['peak_rss_mib']:.0f} MiB")
-    if args.json:
-        write_json(args.json, results)
-        print(f"wrote {args.json}")
-    return 0
+    return finish(results, args.json)
 
 
 if __name__ == "__main__":

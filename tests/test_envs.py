@@ -13,9 +13,9 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import continuum_gym
-from continuum_gym.baselines import DimensionReduced, OcclusionLimits, ProjectedGradient
+from continuum_gym.baselines import DimensionReduced, ProjectedGradient
 from continuum_gym.envs.occlusion import OcclusionAvoidanceEnv, OcclusionAvoidanceVectorEnv
-from continuum_gym.envs.occlusion_kernel import trajectory_batch
+from continuum_gym.envs.common_kernels import trajectory_batch
 from continuum_gym.envs.tasks import hold_start_pool
 from continuum_gym.envs.view_tracking import ViewTrackingEnv, ViewTrackingVectorEnv
 

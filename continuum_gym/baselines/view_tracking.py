@@ -197,13 +197,9 @@ def integrate_view_step(q, qdot, dt, lower, upper, out):
     clamped = 0
     for k in range(6):
         value = q[k] + qdot[k] * dt
-        if value > upper[k]:
-            value = upper[k]
+        out[k] = min(max(value, lower[k]), upper[k])
+        if out[k] != value:
             clamped |= 1 << k
-        elif value < lower[k]:
-            value = lower[k]
-            clamped |= 1 << k
-        out[k] = value
     out[3] = wrap_half_open(out[3])
     out[5] = wrap_half_open(out[5])
     return clamped

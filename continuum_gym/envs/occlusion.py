@@ -183,7 +183,7 @@ class OcclusionCore(BatchedCore):
 
     def controller_observation(self, row=0):
         """The dict observation an analytic controller's ``predict`` reads, for one row."""
-        from continuum_gym.envs.occlusion_kernel import trajectory_batch
+        from continuum_gym.envs.common_kernels import trajectory_batch
 
         t = np.array([self.steps[row] * self.control_dt])
         p = np.empty((1, 1, 3))

@@ -15,10 +15,11 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from continuum_gym.baselines.occlusion import make_scratch, occlusion_rates_kernel, tracking_twist, wrap_angle
-from continuum_gym.geometry.lens_cone import cone_distance_slant, to_lens
+from continuum_gym.baselines.occlusion import make_scratch, occlusion_rates_kernel, wrap_angle
+from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.mbcr import DOF, make_workspace, tip_kernel
+from continuum_gym.envs.common_kernels import clamp, clip_observation, trajectory_point
 from continuum_gym.robots.rotations import cholesky_solve_inplace, orientation_error
 
 ACTION_DIM = DOF + 1
@@ -34,28 +35,6 @@ REWARD_TERMS = ("voi", "tip_position", "tip_orientation", "visibility", "action"
 N_TERMS_REWARD = len(REWARD_TERMS)
 # Failure: the tip is lost.
 MAX_TIP_ERROR = 0.01  # m
-
-
-@njit(cache=True, inline="always")
-def trajectory_point(centre, amp, omega, phase, t, p, v):
-    """x(t) = c + sum a_k sin(w_k t + phi_k) and its derivative, into p and v."""
-    for a in range(p.shape[0]):
-        p[a] = centre[a]
-        v[a] = 0.0
-    for k in range(omega.shape[0]):
-        s = math.sin(omega[k] * t + phase[k])
-        c = math.cos(omega[k] * t + phase[k])
-        for a in range(p.shape[0]):
-            p[a] += amp[k, a] * s
-            v[a] += amp[k, a] * omega[k] * c
-
-
-@njit(cache=True)
-def trajectory_batch(centre, amp, omega, phase, times, p_out, v_out):
-    """Desired positions/velocities (N, T, dim) of N trajectories at times (T,) (s); same code as the kernel."""
-    for i in range(centre.shape[0]):
-        for j in range(times.shape[0]):
-            trajectory_point(centre[i], amp[i], omega[i], phase[i], times[j], p_out[i, j], v_out[i, j])
 
 
 @njit(cache=True)
@@ -150,11 +129,7 @@ def occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration,
     for k in range(DOF + 1):
         o[23 + k] = base_cmd[i, k] / rate_scale_vec[k]
     o[31] = t / (duration[i] * control_dt)
-    for j in range(OBS_DIM):
-        if o[j] > OBS_LIMIT:
-            o[j] = OBS_LIMIT
-        elif o[j] < -OBS_LIMIT:
-            o[j] = -OBS_LIMIT
+    clip_observation(o, OBS_LIMIT)
 
 
 @njit(cache=True)
@@ -223,14 +198,9 @@ def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des,
         if scale < 1.0:
             rate_saturated = 1
         for k in range(DOF):
-            value = q[k] + scale * cmd[k] * dt
-            if value > upper[k]:
-                value = upper[k]
+            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
+            if hit:
                 clamped |= 1 << k
-            elif value < lower[k]:
-                value = lower[k]
-                clamped |= 1 << k
-            q[k] = value
         g_rate = gd + gamma_residual
         if g_rate > gamma_rate_limit:
             g_rate = gamma_rate_limit
@@ -313,5 +283,5 @@ def occlusion_observe_batch(rows, Q, G, step, centre, amp, omega, phase, R_des, 
                           max_bend, rate_scale_vec, ws, scratch, base_cmd, base_info, obs, metrics)
 
 
-__all__ = ["occlusion_step_batch", "occlusion_observe_batch", "trajectory_batch", "REWARD_TERMS", "OBS_DIM",
-           "ACTION_DIM", "tracking_twist", "cone_distance_slant"]
+__all__ = ["occlusion_step_batch", "occlusion_step_batch_parallel", "occlusion_observe_batch", "REWARD_TERMS",
+           "OBS_DIM", "ACTION_DIM"]

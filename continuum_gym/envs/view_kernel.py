@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from continuum_gym.baselines.view_tracking import integrate_view_step, make_view_scratch, view_errors, view_rates_kernel
-from continuum_gym.envs.occlusion_kernel import trajectory_point
+from continuum_gym.envs.common_kernels import clip_observation, trajectory_point
 from continuum_gym.geometry.overlap import overlap_ratio_nb
 
 ACTION_DIM = 6
@@ -96,11 +96,7 @@ def view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, ge
     for k in range(6):
         o[15 + k] = base_cmd[i, k] / action_scale[k]
     o[21] = t / (duration[i] * control_dt)
-    for j in range(OBS_DIM):
-        if o[j] > OBS_LIMIT:
-            o[j] = OBS_LIMIT
-        elif o[j] < -OBS_LIMIT:
-            o[j] = -OBS_LIMIT
+    clip_observation(o, OBS_LIMIT)
 
 
 @njit(cache=True)

@@ -162,7 +162,7 @@ class ViewTrackingCore(BatchedCore):
 
     def davinci_configuration(self, row=0):
         """q_davinci [L_dV, yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
-        from continuum_gym.envs.occlusion_kernel import trajectory_batch
+        from continuum_gym.envs.common_kernels import trajectory_batch
 
         t = np.array([self.steps[row] * self.control_dt])
         x = np.empty((1, 1, 4))
