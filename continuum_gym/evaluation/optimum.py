@@ -1231,6 +1231,27 @@ def resolve_tasks(env, task="all"):
     return (task,)
 
 
+def env_hold_test_optimum(n_tasks=32, limits=None, visibility=VISIBILITY, workers=2, progress=True):
+    """Hold optimum on the OcclusionAvoidance environment's held-out hold tasks (test ids 0..n-1).
+
+    These are the instances ``continuum-gym evaluate`` scores, so ``headroom_closed`` compares each
+    method with the best configuration-and-gamma on exactly the same tasks.
+    """
+    from continuum_gym.envs.tasks import hold_start_pool
+
+    limits = OcclusionLimits() if limits is None else limits
+    starts = np.asarray(hold_start_pool("test", float(limits.max_bend), tuple(limits.insertion)))
+    starts = starts[:_positive_int(n_tasks, "n_tasks")]
+    jobs = [{"q0": q0, "max_bend": limits.max_bend, "insertion": limits.insertion, "visibility": _visibility(visibility),
+             "centring_gamma": 0.0} for q0 in starts]
+    results = _map_jobs(_hold_job, jobs, _positive_int(workers, "workers"), progress, "env hold tasks")
+    voi = np.array([r["voi"] for r in results])
+    return {"task_ids": list(range(len(starts))), "optimum_voi": _rounded(voi),
+            "optimum_gamma": _rounded(np.array([r["gamma"] for r in results])),
+            "optimum_mean_voi": float(np.nanmean(voi)), "visibility": visibility,
+            "limits": {"max_bend": limits.max_bend, "insertion": list(limits.insertion)}}
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", required=True,
                         help=f"environment id: {VIEW_TRACKING_ID} (coverage), {OCCLUSION_ID} (hold, circle) or all")
@@ -1245,6 +1266,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=HOLD_STARTS_SEED, help="hold-start seed (default 2026)")
     parser.add_argument("--global-check", type=int, default=GLOBAL_CHECK_SAMPLE,
                         help="grid points re-solved by a heavy search to measure the optimality gap (0: skip)")
+    parser.add_argument("--env-hold-tasks", type=int, default=32,
+                        help="held-out hold tasks of the environment to solve (default 32, evaluate's --episodes)")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
@@ -1268,6 +1291,7 @@ def run(args) -> int:
                                                global_check=args.global_check)
     if "hold" in tasks:
         results["hold"] = hold_study(n_starts, args.seed, workers=workers, progress=progress)
+        results["hold_test"] = env_hold_test_optimum(args.env_hold_tasks, workers=workers, progress=progress)
     if "circle" in tasks:
         t0 = time.perf_counter()
         results["circle"] = circle_optimum(progress=progress)
