@@ -1,0 +1,54 @@
+"""Copy trained runs into the package as shipped policies (model, config, learning curve, command).
+
+    python scripts/ship_policies.py RUN_DIR [RUN_DIR ...] [--dest continuum_gym/agents/policies]
+
+A run that was stopped before its end ships its latest checkpoint (``checkpoints/latest.zip``); the
+step count it reached is recorded in ``shipped.yml`` beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import yaml
+
+DEST = Path(__file__).resolve().parents[1] / "continuum_gym" / "agents" / "policies"
+
+
+def ship(run: Path, dest: Path) -> Path:
+    config = yaml.safe_load((run / "config.yml").read_text())
+    model = run / "model.zip"
+    source = "model.zip"
+    if not model.exists():
+        model = run / "checkpoints" / "latest.zip"
+        source = "checkpoints/latest.zip"
+    if not model.exists():
+        raise FileNotFoundError(f"{run}: neither model.zip nor checkpoints/latest.zip")
+    state = run / "checkpoints" / "state.json"
+    steps = json.loads(state.read_text())["num_timesteps"] if state.exists() else None
+    target = dest / config["env_id"].split("/")[-1] / run.name
+    target.mkdir(parents=True, exist_ok=True)
+    shutil.copy2(model, target / "model.zip")
+    for name in ("config.yml", "args.yml", "command.txt", "evaluations.npz"):
+        if (run / name).exists():
+            shutil.copy2(run / name, target / name)
+    (target / "shipped.yml").write_text(yaml.safe_dump({"source": source, "num_timesteps": steps}))
+    return target
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--dest", type=Path, default=DEST)
+    args = parser.parse_args(argv)
+    for run in args.runs:
+        print("shipped", ship(run, args.dest))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
