@@ -118,8 +118,16 @@ class AtomicCheckpoint:
         return _Checkpoint()
 
 
-def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes):
-    """Periodic evaluation on held-out test tasks (fixed ids), logged to TensorBoard and evaluations.npz."""
+def headline_metric(env_id: str) -> str:
+    """The held-out metric a run is judged by (lower is better for VOI, higher for OR)."""
+    return "mean_voi" if "OcclusionAvoidance" in env_id else "mean_or"
+
+
+def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=None):
+    """Periodic evaluation on held-out test tasks (fixed ids), logged to TensorBoard and evaluations.npz.
+
+    ``report(timesteps, value)`` is called after each evaluation (a sweep scheduler listens there).
+    """
     from stable_baselines3.common.callbacks import BaseCallback
 
     from continuum_gym.evaluation.rollout import make_core, run_episodes
@@ -127,7 +135,7 @@ def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes):
     kwargs = {**env_kwargs, "task_split": "test"}
     core = make_core(env_id, n_episodes, **kwargs)
     task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)
-    metric = "mean_voi" if "OcclusionAvoidance" in env_id else "mean_or"
+    metric = headline_metric(env_id)
     path = run_dir / "evaluations.npz"
 
     class _Eval(BaseCallback):
@@ -158,12 +166,14 @@ def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes):
             tmp = run_dir / ".evaluations.tmp.npz"
             np.savez(tmp, **{k: np.asarray(v) for k, v in self.history.items()})
             os.replace(tmp, path)
+            if report is not None:
+                report(int(self.num_timesteps), float(result[metric].mean()))
 
     return _Eval()
 
 
 def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs", resume=False,
-          hyperparams=None, progress=True, command=None, n_envs=None) -> Path:
+          hyperparams=None, progress=True, command=None, n_envs=None, report=None) -> Path:
     """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base."""
     if base == "__default__":
         base = BASES.get(env_id, (None,))[0]
@@ -229,8 +239,8 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
     with open(run_dir / "command.txt", "a") as handle:
         handle.write(command_line + "\n")
     saver = AtomicCheckpoint.make(run_dir, int(hp.get("checkpoint_freq", 100000)))
-    callbacks = [saver, make_eval_callback(env_id, {k: v for k, v in env_kwargs.items()}, run_dir,
-                                           int(hp.get("eval_freq", 100000)), int(hp.get("n_eval_episodes", 16)))]
+    callbacks = [saver, make_eval_callback(env_id, dict(env_kwargs), run_dir, int(hp.get("eval_freq", 100000)),
+                                           int(hp.get("n_eval_episodes", 16)), report)]
     if base is not None and int(hp.get("burn_in_steps", 0)) > 0 and not resume:
         callbacks.append(ActorBurnIn(int(hp["burn_in_steps"])))
     remaining = total - model.num_timesteps

@@ -1,0 +1,106 @@
+"""Sweeps on Ray Tune: search-space validation, a local 2-trial sweep, killed-trial resume, no overwrite."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+from continuum_gym.agents.sweep import load_search, trial_tag
+from continuum_gym.cli import main
+
+VIEW = "ContinuumGym/ViewTracking-v0"
+TINY = {VIEW: {"policy": "MlpPolicy", "n_envs": 4, "n_steps": 32, "batch_size": 64, "n_epochs": 1,
+               "n_timesteps": 2048, "checkpoint_freq": 256, "eval_freq": 512, "n_eval_episodes": 2,
+               "residual_scale": 0.3, "learning_rate": 3.0e-4, "policy_kwargs": {"net_arch": [16]},
+               "env_kwargs": {"task": "static", "max_episode_steps": 40}}}
+
+
+@pytest.fixture()
+def files(tmp_path):
+    hp = tmp_path / "hp.yml"
+    hp.write_text(yaml.safe_dump(TINY))
+    search = tmp_path / "search.yml"
+    search.write_text(yaml.safe_dump({"method": "grid", "space": {"learning_rate": {"grid": [1e-4, 3e-4]}}}))
+    return hp, search
+
+
+def test_unknown_search_key_fails_before_anything_starts(tmp_path, capsys):
+    bad = tmp_path / "bad.yml"
+    bad.write_text(yaml.safe_dump({"space": {"learning_rat": {"grid": [1e-4]}}}))
+    assert main(["sweep", "--env", VIEW, "--search", str(bad), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "learning_rat" in err and "learning_rate" in err
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match="unknown keys"):
+        (tmp_path / "b2.yml").write_text(yaml.safe_dump({"spaces": {}}))
+        load_search(tmp_path / "b2.yml", "ppo", VIEW)
+    with pytest.raises(ValueError, match="kind"):
+        (tmp_path / "b3.yml").write_text(yaml.safe_dump({"space": {"learning_rate": {"normal": [0, 1]}}}))
+        load_search(tmp_path / "b3.yml", "ppo", VIEW)
+
+
+def test_missing_ray_says_how_to_install(tmp_path, files, monkeypatch, capsys):
+    hp, search = files
+    monkeypatch.setitem(sys.modules, "ray", None)
+    assert main(["sweep", "--env", VIEW, "--hyperparams", str(hp), "--out", str(tmp_path / "o")]) == 2
+    assert "pip install" in capsys.readouterr().err
+
+
+def test_trial_tags_are_stable_and_distinct():
+    a = trial_tag({"learning_rate": 1e-4, "seed": 0})
+    assert a == trial_tag({"seed": 0, "learning_rate": 1e-4})
+    assert a != trial_tag({"learning_rate": 3e-4, "seed": 0}) and a != trial_tag({"learning_rate": 1e-4, "seed": 1})
+
+
+@pytest.mark.slow
+def test_local_two_trial_sweep_writes_its_table_and_refuses_to_overwrite(tmp_path, files):
+    pytest.importorskip("ray")
+    hp, search = files
+    out = tmp_path / "sweeps"
+    argv = ["sweep", "--env", VIEW, "--seeds", "0", "--search", str(search), "--hyperparams", str(hp), "--out",
+            str(out), "--name", "s"]
+    assert main(argv) == 0
+    summary = json.loads((out / "s" / "sweep_results.json").read_text())
+    assert len(summary["trials"]) == 2 and all(t["mean_or"] is not None for t in summary["trials"])
+    assert all(t["timesteps"] >= 2048 for t in summary["trials"])
+    assert "| config |" in (out / "s" / "sweep_results.md").read_text()
+    best = yaml.safe_load((out / "s" / "best_hyperparams.yml").read_text())[VIEW]
+    assert best["learning_rate"] in (1e-4, 3e-4) and best["n_envs"] == 4
+    runs = list((out / "s" / "trials").glob("*/ViewTracking_ppo_dimension_reduced_seed0/tb"))
+    assert len(runs) == 2  # TensorBoard logs per trial
+    before = (out / "s" / "sweep_results.json").stat().st_mtime_ns
+    assert main(argv) == 2  # exists: nothing overwritten without --resume
+    assert (out / "s" / "sweep_results.json").stat().st_mtime_ns == before
+
+
+@pytest.mark.slow
+def test_killed_trial_resumes_from_its_checkpoint(tmp_path, files):
+    hp, _ = files
+    code = ("import sys; from continuum_gym.agents.sweep import run_trial; "
+            f"run_trial({{'learning_rate': 3e-4, 'seed': 1}}, {VIEW!r}, 'ppo', 'dimension_reduced', None, "
+            f"{str(tmp_path / 'sw')!r}, {str(hp)!r})")
+    run_dir = tmp_path / "sw" / "trials" / trial_tag({"learning_rate": 3e-4, "seed": 1}) / \
+        "ViewTracking_ppo_dimension_reduced_seed1"
+    state = run_dir / "checkpoints" / "state.json"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 240
+    while not state.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.2)
+    assert state.exists()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    killed_at = json.loads(state.read_text())["num_timesteps"]
+    assert killed_at < 2048 and not (run_dir / "model.zip").exists()
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    final = json.loads(state.read_text())["num_timesteps"]
+    assert final >= 2048 and (run_dir / "model.zip").exists()
+    curve = np.load(run_dir / "evaluations.npz")
+    assert curve["timesteps"][-1] == final
