@@ -78,6 +78,11 @@ def test_local_two_trial_sweep_writes_its_table_and_refuses_to_overwrite(tmp_pat
     before = (out / "s" / "sweep_results.json").stat().st_mtime_ns
     assert main(argv) == 2  # exists: nothing overwritten without --resume
     assert (out / "s" / "sweep_results.json").stat().st_mtime_ns == before
+    # Resuming a finished sweep (Tune's restore) re-runs no trial: the trained models are untouched.
+    models = {p: p.stat().st_mtime_ns for p in (out / "s" / "trials").glob("*/*/model.zip")}
+    assert len(models) == 2
+    assert main(argv + ["--resume"]) == 0
+    assert models == {p: p.stat().st_mtime_ns for p in (out / "s" / "trials").glob("*/*/model.zip")}
 
 
 @pytest.mark.slow
