@@ -48,10 +48,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+
 from numba import njit
 from scipy.optimize import brentq, differential_evolution, least_squares, minimize
 
 from continuum_gym.baselines import DimensionReduced, OcclusionLimits, ProjectedGradient, ResolvedRate
+from continuum_gym.baselines.base import as_finite
 from continuum_gym.baselines.scenarios import (
     CASE_STUDY_START,
     COVERAGE_THRESHOLD,
@@ -68,6 +70,7 @@ from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope, MultiBack
 from continuum_gym.robots.endoscope import _kinematics_one
 from continuum_gym.robots.mbcr import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import cholesky_solve_inplace, orientation_error, rotation_vector
+from continuum_gym.robots.validation import positive
 
 VIEW_TRACKING_ID = "ContinuumGym/ViewTracking-v0"
 OCCLUSION_ID = "ContinuumGym/OcclusionAvoidance-v0"
@@ -255,10 +258,10 @@ def bounded_least_squares(target_p, target_R, q0=CASE_STUDY_START, orientation_w
     robot = ContinuumEndoscope() if robot is None else robot
     if not isinstance(robot, ContinuumEndoscope):
         raise ValueError(f"robot must be a ContinuumEndoscope; got {type(robot).__name__}")
-    weight = _positive_finite(orientation_weight, "orientation_weight", "m/rad")
-    target_p = _finite_array(target_p, (3,), "target_p")
-    target_R = _finite_array(target_R, (3, 3), "target_R")
-    q0 = _finite_array(q0, (6,), "q0")
+    weight = positive(orientation_weight, "orientation_weight", "m/rad")
+    target_p = as_finite(target_p, (3,), "target_p")
+    target_R = as_finite(target_R, (3, 3), "target_R")
+    q0 = as_finite(q0, (6,), "q0")
     try:
         shape = np.broadcast_shapes(target_p.shape[:-1], target_R.shape[:-2], q0.shape[:-1])
     except ValueError as error:
@@ -401,7 +404,7 @@ def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, eff
     if effort not in VIEW_EFFORT:
         raise ValueError(f"effort must be one of {tuple(VIEW_EFFORT)}; got {effort!r}")
     workers = _positive_int(workers, "workers")
-    q_davinci = _finite_array(q_davinci, (4,), "q_davinci")
+    q_davinci = as_finite(q_davinci, (4,), "q_davinci")
     shape = q_davinci.shape[:-1]
     grid = q_davinci.reshape(-1, 4)
     n = grid.shape[0]
@@ -757,12 +760,12 @@ def trace_self_motion(robot, q0, limits, step=TRACE_STEP, max_steps=20_000, tole
     """
     if not isinstance(robot, MultiBackboneRobot):
         raise ValueError(f"robot must be a MultiBackboneRobot; got {type(robot).__name__}")
-    q0 = _finite_array(q0, (7,), "q0")
+    q0 = as_finite(q0, (7,), "q0")
     if q0.shape != (7,):
         raise ValueError(f"q0 must have shape (7,); got {q0.shape}")
-    step = _positive_finite(step, "step", "rad")
+    step = positive(step, "step", "rad")
     max_steps = _positive_int(max_steps, "max_steps")
-    tolerance = _positive_finite(tolerance, "tolerance", "m or rad")
+    tolerance = positive(tolerance, "tolerance", "m or rad")
     lower, upper = _limit_arrays(limits)
     if np.any(q0 < lower) or np.any(q0 > upper):
         raise ValueError(f"q0 must be within the limits; got q0 = {q0.tolist()}")
@@ -787,7 +790,7 @@ def feasible_gamma_intervals(tip, visibility=VISIBILITY, cone=None, scan=GAMMA_S
     """
     cone = LensCone() if cone is None else cone
     visibility = _visibility(visibility)
-    tip = _finite_array(tip, (3,), "tip")
+    tip = as_finite(tip, (3,), "tip")
     bound = visibility * cone.beta
     grid = np.linspace(-math.pi, math.pi, int(scan), endpoint=False)
     ok = cone_coordinates(tip, grid, cone)["angle"] <= bound
@@ -924,7 +927,7 @@ def centring_gamma(robot, tips, gamma0=0.0, dt=PAPER_DT, eta2=30.0, gamma_rate=N
     Explicit Euler from ``gamma0``; ``gamma_rate`` caps |gamma_dot| (rad/s; the env's limit is 3).
     Returns gamma (T + 1,) — the value before each step, then the final one.
     """
-    tips = _finite_array(tips, (3,), "tips").reshape(-1, 3)
+    tips = as_finite(tips, (3,), "tips").reshape(-1, 3)
     out = np.empty(len(tips) + 1)
     gamma = float(gamma0)
     out[0] = gamma
@@ -947,7 +950,7 @@ def projected_gradient_hold(robot, starts, limits, steps=HOLD_ITERATIONS, visibi
     """
     cone = LensCone() if cone is None else cone
     visibility = _visibility(visibility)
-    starts = _finite_array(starts, (7,), "starts").reshape(-1, 7)
+    starts = as_finite(starts, (7,), "starts").reshape(-1, 7)
     controller = ProjectedGradient(robot=robot, cone=cone, limits=limits)
     p0, R0 = robot.forward_kinematics(starts)
     n = len(starts)
@@ -1041,7 +1044,7 @@ def circle_optimum(robot=None, task=None, limits=None, visibility=VISIBILITY, co
     limits = OcclusionLimits() if limits is None else limits
     cone = LensCone() if cone is None else cone
     visibility = _visibility(visibility)
-    sample_dt = _positive_finite(sample_dt, "sample_dt", "s")
+    sample_dt = positive(sample_dt, "sample_dt", "s")
     n = int(round(task.period / sample_dt))
     times = np.arange(n) * sample_dt
     p_des, _ = task.trajectory(times, cone.alpha, cone.d_o)
@@ -1354,28 +1357,6 @@ def summary_table(results: dict) -> str:
 
 
 # ====================================================================== input checks
-def _finite_array(x, tail, name):
-    try:
-        array = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a numeric array of shape (..., {', '.join(map(str, tail))})") from error
-    if array.ndim < len(tail) or array.shape[array.ndim - len(tail):] != tuple(tail):
-        raise ValueError(f"{name} must have shape (..., {', '.join(map(str, tail))}); got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite (no NaN or inf)")
-    return array
-
-
-def _positive_finite(value, name, unit):
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a positive number ({unit}); got {value!r}") from error
-    if not math.isfinite(number) or number <= 0.0:
-        raise ValueError(f"{name} must be finite and > 0 ({unit}); got {value!r}")
-    return number
-
-
 def _positive_int(value, name):
     if isinstance(value, bool) or int(value) != value or value < 1:
         raise ValueError(f"{name} must be an integer >= 1; got {value!r}")
