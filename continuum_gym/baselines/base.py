@@ -19,6 +19,18 @@ def as_finite(x, tail: tuple, name: str) -> np.ndarray:
     return array
 
 
+def broadcast_rows(shape: tuple, *arrays_and_tails):
+    """Broadcast each (array, tail) to ``shape + tail`` and flatten the batch: C-contiguous (-1, *tail) rows."""
+    return tuple(np.ascontiguousarray(np.broadcast_to(x, shape + tail).reshape((-1,) + tail))
+                 for x, tail in arrays_and_tails)
+
+
+def as_rotation_field(value) -> np.ndarray:
+    """A rotation from an observation dict: (..., 3, 3) or flattened (..., 9)."""
+    R = np.asarray(value, dtype=float)
+    return R.reshape(R.shape[:-1] + (3, 3)) if R.shape[-1] == 9 else R
+
+
 class Controller:
     """Base of the analytic baselines.
 

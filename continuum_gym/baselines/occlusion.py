@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from continuum_gym.baselines.base import Controller, as_finite
+from continuum_gym.baselines.base import Controller, as_finite, as_rotation_field, broadcast_rows
 from continuum_gym.geometry.force_field import PAPER_PSPS, potential_gradient_kernel, resolve_field
 from continuum_gym.geometry.lens_cone import centre_distance_kernel, resolve_cone
 from continuum_gym.robots.mbcr import DOF, MultiBackboneRobot, make_workspace, tip_kernel
@@ -366,12 +366,8 @@ class OcclusionController(Controller):
                                         v_des.shape[:-1])
         except ValueError as error:
             raise ValueError(f"q, gamma and target batch shapes do not broadcast: {error}") from error
-
-        def flat(x, tail):
-            return np.ascontiguousarray(np.broadcast_to(x, shape + tail).reshape((-1,) + tail))
-
-        return (flat(q, (DOF,)), flat(gamma, ()), flat(p_des, (3,)), flat(R_des, (3, 3)),
-                flat(v_des, (3,)), shape)
+        return (*broadcast_rows(shape, (q, (DOF,)), (gamma, ()), (p_des, (3,)), (R_des, (3, 3)), (v_des, (3,))),
+                shape)
 
     def joint_rates(self, q, target, gamma=0.0, dt=1e-3):
         """Commanded rates [q_dot (7), gamma_dot] of shape (..., 8) (rad/s; m/s for q_ins).
@@ -455,8 +451,7 @@ class OcclusionController(Controller):
         Returns (rates (..., 8), None): the same command as ``joint_rates``.
         """
         obs = self._observation_dict(observation, ("q", "gamma", "p_des", "R_des"))
-        target = (obs["p_des"], np.reshape(obs["R_des"], np.shape(obs["R_des"])[:-1] + (3, 3))
-                  if np.shape(obs["R_des"])[-1] == 9 else obs["R_des"], obs.get("v_des"))
+        target = (obs["p_des"], as_rotation_field(obs["R_des"]), obs.get("v_des"))
         gamma = np.asarray(obs["gamma"], dtype=float)
         if gamma.ndim and gamma.shape[-1] == 1:
             gamma = gamma[..., 0]

@@ -24,7 +24,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from continuum_gym.baselines.base import Controller, as_finite
+from continuum_gym.baselines.base import Controller, as_finite, as_rotation_field, broadcast_rows
 from continuum_gym.robots.endoscope import ContinuumEndoscope, _kinematics_one
 from continuum_gym.robots.rotations import cholesky_solve_inplace, orientation_error
 from continuum_gym.robots.validation import positive
@@ -287,11 +287,7 @@ class ViewTrackingController(Controller):
             shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1], R.shape[:-2])
         except ValueError as error:
             raise ValueError(f"q and target batch shapes do not broadcast: {error}") from error
-
-        def flat(x, tail):
-            return np.ascontiguousarray(np.broadcast_to(x, shape + tail).reshape((-1,) + tail))
-
-        return flat(q, (DOF,)), flat(p, (3,)), flat(R, (3, 3)), shape
+        return (*broadcast_rows(shape, (q, (DOF,)), (p, (3,)), (R, (3, 3))), shape)
 
     def joint_rates(self, q, target, dt=0.01):
         """Rates (..., 6) in SI (m/s for L0, rad/s) toward the target frame; dt (s) sets the capped twist."""
@@ -340,10 +336,8 @@ class ViewTrackingController(Controller):
     def predict(self, observation, state=None, episode_start=None, deterministic=False):
         """SB3 ``predict``: observation dict with ``q``, ``p_target``, ``R_target`` (and optional ``dt``)."""
         obs = self._observation_dict(observation, ("q", "p_target", "R_target"))
-        R = np.asarray(obs["R_target"], dtype=float)
-        if R.shape[-1] == 9:
-            R = R.reshape(R.shape[:-1] + (3, 3))
-        return self.joint_rates(obs["q"], (obs["p_target"], R), dt=float(obs.get("dt", 0.01))), state
+        target = (obs["p_target"], as_rotation_field(obs["R_target"]))
+        return self.joint_rates(obs["q"], target, dt=float(obs.get("dt", 0.01))), state
 
 
 @njit(cache=True)

@@ -117,6 +117,19 @@ class BatchedCore:
     def info(self, rows=None) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 
+    def _install_tasks(self, rows, fresh) -> None:
+        """Copy freshly drawn task instances into ``rows`` and restart their episodes (state from the task)."""
+        for field in vars(fresh):
+            getattr(self.tasks, field)[rows] = getattr(fresh, field)
+        self.limit[rows] = fresh.duration
+        if self.max_episode_steps is not None:
+            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
+        self.q[rows] = fresh.start_q
+        self.steps[rows] = 0
+        self.flags[rows] = 0
+        self.terms[rows] = 0.0
+        self.rewards[rows] = 0.0
+
     def info_row(self, row: int) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 

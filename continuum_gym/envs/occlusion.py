@@ -111,17 +111,8 @@ class OcclusionCore(BatchedCore):
         rows = np.asarray(rows, dtype=np.int64)
         fresh = occlusion_tasks(self.task, self.task_split, task_ids, self.control_dt, self.limits.max_bend,
                                 self.limits.insertion)
-        for field in ("start_q", "start_gamma", "centre", "amp", "omega", "phase", "R_des", "duration", "task_id"):
-            getattr(self.tasks, field)[rows] = getattr(fresh, field)
-        self.limit[rows] = fresh.duration
-        if self.max_episode_steps is not None:
-            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
-        self.q[rows] = fresh.start_q
+        self._install_tasks(rows, fresh)
         self.gamma[rows] = fresh.start_gamma
-        self.steps[rows] = 0
-        self.flags[rows] = 0
-        self.terms[rows] = 0.0
-        self.rewards[rows] = 0.0
         occlusion_observe_batch(rows, self.q, self.gamma, self.steps, self.tasks.centre, self.tasks.amp,
                                 self.tasks.omega, self.tasks.phase, self.tasks.R_des, self.tasks.duration,
                                 self.control_dt, self.substeps, *self._model_args(), self.limits.lower,

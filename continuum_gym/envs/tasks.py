@@ -52,6 +52,17 @@ class TaskBatch:
     task_id: np.ndarray  # (N,) int
 
 
+def _sines_through(batch, i, start, amp, rng, frequency_hz):
+    """Row i follows start + sum_k amp[k] (sin(w_k t + phi_k) - sin(phi_k)): random frequencies (Hz range)
+    and phases, and x(0) = start exactly."""
+    omega = 2 * math.pi * rng.uniform(*frequency_hz, len(amp))
+    phase = rng.uniform(-math.pi, math.pi, len(amp))
+    batch.amp[i] = amp
+    batch.omega[i] = omega
+    batch.phase[i] = phase
+    batch.centre[i] = start - (amp * np.sin(phase)[:, None]).sum(axis=0)
+
+
 def _empty_batch(n, dof, dim):
     return TaskBatch(np.zeros((n, dof)), np.zeros(n), np.zeros((n, dim)), np.zeros((n, N_TERMS, dim)),
                      np.zeros((n, N_TERMS)), np.zeros((n, N_TERMS)), np.tile(np.eye(3), (n, 1, 1)),
@@ -144,14 +155,7 @@ def occlusion_tasks(task: str, split: str, task_ids, control_dt: float, max_bend
         if task == "random":
             direction = rng.normal(size=(N_TERMS, 3))
             direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-            amp = direction * rng.uniform(0.001, 0.004, (N_TERMS, 1))
-            omega = 2 * math.pi * rng.uniform(0.05, 0.25, N_TERMS)
-            phase = rng.uniform(-math.pi, math.pi, N_TERMS)
-            batch.amp[i] = amp
-            batch.omega[i] = omega
-            batch.phase[i] = phase
-            # Start on the trajectory: x(0) = p0.
-            batch.centre[i] = p0 - (amp * np.sin(phase)[:, None]).sum(axis=0)
+            _sines_through(batch, i, p0, direction * rng.uniform(0.001, 0.004, (N_TERMS, 1)), rng, (0.05, 0.25))
     return batch
 
 
@@ -196,12 +200,7 @@ def view_tasks(task: str, split: str, task_ids, control_dt: float, grid: int = 2
             start = np.array([rng.uniform(0.055, 0.075), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.3),
                               rng.uniform(-0.5, 0.5)])
             amp = rng.uniform(0, 1, (N_TERMS, 4)) * np.array([0.004, 0.25, 0.25, 0.25])
-            omega = 2 * math.pi * rng.uniform(0.05, 0.2, N_TERMS)
-            phase = rng.uniform(-math.pi, math.pi, N_TERMS)
-            batch.amp[i] = amp
-            batch.omega[i] = omega
-            batch.phase[i] = phase
-            batch.centre[i] = start - (amp * np.sin(phase)[:, None]).sum(axis=0)
+            _sines_through(batch, i, start, amp, rng, (0.05, 0.2))
     return batch
 
 

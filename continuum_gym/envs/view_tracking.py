@@ -111,16 +111,7 @@ class ViewTrackingCore(BatchedCore):
     def reset_rows(self, rows, task_ids):
         rows = np.asarray(rows, dtype=np.int64)
         fresh = view_tasks(self.task, self.task_split, task_ids, self.control_dt, self.grid)
-        for field in ("start_q", "centre", "amp", "omega", "phase", "duration", "task_id"):
-            getattr(self.tasks, field)[rows] = getattr(fresh, field)
-        self.limit[rows] = fresh.duration
-        if self.max_episode_steps is not None:
-            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
-        self.q[rows] = fresh.start_q
-        self.steps[rows] = 0
-        self.flags[rows] = 0
-        self.terms[rows] = 0.0
-        self.rewards[rows] = 0.0
+        self._install_tasks(rows, fresh)
         view_observe_batch(rows, self.q, self.steps, self.tasks.centre, self.tasks.amp, self.tasks.omega,
                            self.tasks.phase, self.tasks.duration, self.control_dt, self.robot._geom,
                            self.controller.params, self.base_controller is not None, *self._geometry_args(),
