@@ -182,6 +182,38 @@ def test_reward_is_the_sum_of_weighted_terms(env_id):
     assert infos[1]["reward_terms"][name] == pytest.approx(2 * infos[0]["reward_terms"][name])
 
 
+def test_overlap_bonus_pays_exactly_when_the_coverage_criterion_holds():
+    env = ViewTrackingEnv(task="case2", task_split="test", reward_weights={"overlap_bonus": 2.5})
+    env.reset(seed=0)
+    seen = set()
+    for _ in range(150):
+        _, _, _, _, info = env.step(np.zeros(6, dtype=np.float32))
+        above = info["overlap_ratio"] > 0.8
+        assert info["reward_terms"]["overlap_bonus"] == (2.5 if above else 0.0)
+        seen.add(bool(above))
+    assert seen == {True, False}  # the episode crosses the threshold, so both branches were checked
+
+
+def test_pan_tilt_task_draws_the_coverage_distribution_off_its_grid():
+    from continuum_gym.baselines.scenarios import COVERAGE_INSERTION, coverage_grid
+
+    centres = {}
+    for split in ("train", "test"):
+        env = ViewTrackingEnv(task="pan_tilt", task_split=split)
+        rows = []
+        for task_id in range(200):
+            env.reset(options={"task_id": task_id})
+            rows.append(env.core.tasks.centre[0].copy())
+        centres[split] = np.array(rows)
+    for rows in centres.values():
+        assert np.all(rows[:, 0] == COVERAGE_INSERTION) and np.all(rows[:, 3] == 0.0)
+        assert np.all(np.abs(rows[:, 1:3]) <= math.pi / 3) and np.abs(rows[:, 1:3]).max() > 0.9 * math.pi / 3
+    grid = coverage_grid(21)
+    for rows in centres.values():
+        assert np.abs(rows[:, None, 1:3] - grid[None, :, 1:3]).max(axis=-1).min() > 1e-9  # never a grid point
+    assert np.abs(centres["train"][:, None] - centres["test"][None]).max(axis=-1).min() > 1e-9
+
+
 def test_occlusion_info_reports_metrics_and_saturation():
     env = OcclusionAvoidanceEnv(base_controller=None, task="hold")
     env.reset(seed=0)
@@ -191,6 +223,59 @@ def test_occlusion_info_reports_metrics_and_saturation():
                 "rate_saturated", "gamma", "base_command"):
         assert key in info
     assert 0 <= info["voi"] <= 1 and info["clamped_joints"].shape == (7,)
+
+
+# ---------------------------------------------------------------- visibility guard
+@pytest.mark.parametrize("direction", [1.0, -1.0])
+def test_visibility_guard_keeps_the_tip_in_view_and_says_so(direction):
+    """A residual that spins the endoscope as fast as it can: the guard stops it at its bound, not before."""
+    action = np.zeros(8, dtype=np.float32)
+    action[7] = direction
+    fractions = {}
+    for guard in (0.69, None):
+        env = OcclusionAvoidanceEnv(task="hold", task_split="test", residual_scale=1.0, visibility_guard=guard)
+        env.reset(seed=3)
+        seen, flagged = [], []
+        for _ in range(60):
+            _, _, terminated, truncated, info = env.step(action)
+            seen.append(info["tip_view_fraction"])
+            flagged.append(info["visibility_guarded"])
+        fractions[guard] = np.array(seen)
+        if guard is None:
+            assert not any(flagged)
+        else:
+            assert any(flagged)
+    assert fractions[None].max() > 0.9  # unguarded, the tip leaves the view
+    # Guarded: held at the bound (the tip moves within a substep, hence the small slack) ...
+    assert fractions[0.69].max() <= 0.69 + 1e-3
+    # ... and pushed right up to it: the guard cuts the residual, not the whole rotation.
+    assert fractions[0.69][-10:].min() > 0.685
+
+
+def test_guard_gamma_rate_keeps_the_largest_feasible_share_of_the_residual():
+    from continuum_gym.envs.occlusion_kernel import guard_gamma_rate, view_fraction_at
+
+    core = OcclusionAvoidanceEnv(task="hold").core
+    prm = core.controller.params
+    rng = np.random.default_rng(0)
+    shares = np.linspace(0.0, 1.0, 20001)
+    checked = 0
+    for _ in range(200):
+        tip = core.robot.forward_kinematics(core.q[0] + rng.normal(0, 0.05, 7))[0]
+        gamma, base_rate, residual_rate, dt = rng.uniform(-np.pi, np.pi), rng.normal(0, 1), rng.normal(0, 3), 0.05
+        rate, guarded = guard_gamma_rate(tip, gamma, base_rate, residual_rate, dt, 0.69, prm)
+        bound = max(0.69, view_fraction_at(tip, gamma + base_rate * dt, prm))
+        feasible = [view_fraction_at(tip, gamma + (base_rate + a * residual_rate) * dt, prm) <= bound for a in shares]
+        if feasible[-1]:
+            assert not guarded and rate == base_rate + residual_rate
+            continue
+        checked += 1
+        # Brute force: the first infeasible share on a fine scan (the fraction is monotone over so small a turn).
+        first_out = shares[np.argmin(feasible)]
+        assert guarded
+        assert view_fraction_at(tip, gamma + rate * dt, prm) <= bound
+        assert abs((rate - base_rate) / residual_rate - first_out) <= 1e-4
+    assert checked > 20
 
 
 # ---------------------------------------------------------------- splits
@@ -220,6 +305,7 @@ def test_train_and_test_tasks_are_disjoint():
     (OCCLUSION, {"max_bend": -0.5}, "max_bend"),
     (OCCLUSION, {"substeps": 0}, "substeps"),
     (OCCLUSION, {"control_dt": 0.0}, "control_dt"),
+    (OCCLUSION, {"visibility_guard": 1.5}, "visibility_guard"),
     (VIEW, {"task": "coverage"}, "coverage"),
     (VIEW, {"base_controller": "projected_gradient"}, "base_controller"),
     (VIEW, {"residual_scale": -0.1}, "residual_scale"),

@@ -41,6 +41,8 @@ from continuum_gym.robots.validation import positive
 # otherwise occlusion is "solved" by looking away from the tip.
 DEFAULT_WEIGHTS = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0, "action": 0.01}
 RESIDUAL_SPACES = ("nullspace", "joint")
+# A hair inside the 0.7 half-angles of the visibility criterion: the tip still moves within a substep.
+DEFAULT_VISIBILITY_GUARD = 0.69
 
 
 class OcclusionCore(BatchedCore):
@@ -51,7 +53,8 @@ class OcclusionCore(BatchedCore):
     def __init__(self, num_envs=1, task="hold", task_split="train", base_controller="projected_gradient",
                  residual_scale=0.3, residual_space="nullspace", reward_weights=None, control_dt=0.01, substeps=10,
                  max_bend=math.pi / 2, insertion=(0.0, 0.04), bend_rate=3.0, plane_rate=6.0, insertion_rate=0.02,
-                 gamma_rate=3.0, lens_model="literal", max_episode_steps=None):
+                 gamma_rate=3.0, lens_model="literal", max_episode_steps=None,
+                 visibility_guard=DEFAULT_VISIBILITY_GUARD):
         self.num_envs = int(num_envs)
         self.task = choose(task, OCCLUSION_TASKS, "task")
         self.task_split = choose(task_split, TASK_SPLITS, "task_split")
@@ -77,6 +80,10 @@ class OcclusionCore(BatchedCore):
                                           limits=self.limits)
         self.robot = self.controller.robot
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        if visibility_guard is not None and not (0.0 < visibility_guard < 1.0):
+            raise ValueError(f"visibility_guard must be a fraction of the cone half-angle in (0, 1), or None to turn "
+                             f"the guard off; got {visibility_guard!r}")
+        self.visibility_guard = visibility_guard
         self.task_count = occlusion_task_count(self.task, self.task_split)
         self.rate_scale_vec = np.append(self.limits.rate_limit, self.limits.gamma_rate)
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (OBS_DIM,), np.float32)
@@ -93,7 +100,7 @@ class OcclusionCore(BatchedCore):
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.n_chunks = parallel_chunks(n)
-        self.flags = np.zeros((n, 7), dtype=np.int64)
+        self.flags = np.zeros((n, 8), dtype=np.int64)
         self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
                                      self.limits.max_bend, self.limits.insertion)
         self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
@@ -103,7 +110,8 @@ class OcclusionCore(BatchedCore):
             self.tasks.duration, self.limit, self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm,
             has_base, self.residual_space == "nullspace", self.residual_scale if has_base else 1.0,
             self.rate_scale_vec, self.limits.rate_limit, self.limits.gamma_rate, self.limits.lower,
-            self.limits.upper, self.limits.max_bend, self._weights, VISIBILITY_FRACTION, self.base_cmd,
+            self.limits.upper, self.limits.max_bend, self._weights, VISIBILITY_FRACTION,
+            -1.0 if visibility_guard is None else float(visibility_guard), self.base_cmd,
             self.base_info, self.obs, self.metrics, self.terms, self.rewards, self.flags)
 
     # ------------------------------------------------------------------ state
@@ -148,6 +156,7 @@ class OcclusionCore(BatchedCore):
             "gamma_rate_saturated": bool(f[2]),
             "base_frozen_joints": BIT_TABLE[f[5] & 127, :7].copy(),
             "base_rate_saturated": bool(f[6]),
+            "visibility_guarded": bool(f[7]),
             "base_command": self.base_cmd[row].copy(),
             "task_id": int(self.tasks.task_id[row]),
             "elapsed_steps": int(self.steps[row]),
@@ -167,6 +176,7 @@ class OcclusionCore(BatchedCore):
             "gamma_rate_saturated": self.flags[:, 2].astype(bool),
             "base_frozen_joints": ((self.flags[:, 5:6] >> bits) & 1).astype(bool),
             "base_rate_saturated": self.flags[:, 6].astype(bool),
+            "visibility_guarded": self.flags[:, 7].astype(bool),
             "base_command": self.base_cmd.copy(),
             "task_id": self.tasks.task_id.copy(),
             "elapsed_steps": self.steps.copy(),
@@ -220,6 +230,13 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     ``residual_space="nullspace"`` the joint residual is projected into the tip Jacobian's null space
     at every substep, so it cannot disturb tracking; ``"joint"`` adds it as is.
 
+    The visibility guard (``visibility_guard``, default 0.69 of the half-angle) makes tip visibility a
+    hard constraint on the residual: at every substep, the residual's share of the endoscope rotation
+    is scaled back (bisection) where it would carry the tip beyond the guard, or beyond where the
+    baseline's own rotation leaves it if that is further. The baseline's command is never changed, so a
+    zero action is still the baseline exactly. Each intervention sets ``info["visibility_guarded"]``.
+    ``visibility_guard=None`` turns it off (visibility is then only a reward term).
+
     | Num | Action | Unit at 1.0 (default limits) |
     |-----|--------|------|
     | 0, 2, 4 | theta_j rate | 3 rad/s |
@@ -266,6 +283,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
     - ``base_controller``: ``"projected_gradient"`` (default), ``"minimum_norm"`` or ``None``.
     - ``residual_scale`` (0.3), ``residual_space`` (``"nullspace"``), ``reward_weights``.
+    - ``visibility_guard``: fraction of the cone half-angle in (0, 1) (default 0.69) or ``None`` (off).
     - ``control_dt`` (0.01 s) and ``substeps`` (10): the paper's 1 ms loop under a 10 ms policy.
     - Limits the paper lacks (assumptions): ``max_bend`` (pi/2, two-sided |pi/2 - theta_j| <= max_bend),
       ``insertion`` ((0, 0.04) m), ``bend_rate`` (3 rad/s), ``plane_rate`` (6 rad/s), ``insertion_rate``

@@ -35,6 +35,8 @@ REWARD_TERMS = ("voi", "tip_position", "tip_orientation", "visibility", "action"
 N_TERMS_REWARD = len(REWARD_TERMS)
 # Failure: the tip is lost.
 MAX_TIP_ERROR = 0.01  # m
+# Share of the residual kept by the visibility guard, resolved to 2^-20.
+GUARD_BISECTIONS = 20
 
 
 @njit(cache=True)
@@ -59,6 +61,33 @@ def _project_nullspace(J, r, A, B, out):
         for a in range(6):
             acc += J[a, k] * B[a, 0]
         out[k] = r[k] - acc
+
+
+@njit(cache=True)
+def view_fraction_at(p, gamma, prm):
+    """Angle of point p (m, {w}) from the lens axis at endoscope rotation gamma, in half-angles."""
+    xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, prm.d_o, prm.alpha, prm.model)
+    return math.atan2(math.sqrt(xl * xl + yl * yl), zl) / prm.beta
+
+
+@njit(cache=True)
+def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, prm):
+    """Endoscope rate with the residual's share scaled back so the tip p stays within ``bound`` half-angles.
+
+    The baseline's own rate is never changed: the residual is cut only where it would carry the tip
+    beyond max(bound, where the baseline alone leaves it). Returns (rate, guarded).
+    """
+    limit = max(bound, view_fraction_at(p, gamma + base_rate * dt, prm))
+    if view_fraction_at(p, gamma + (base_rate + residual_rate) * dt, prm) <= limit:
+        return base_rate + residual_rate, False
+    low, high = 0.0, 1.0  # share of the residual: low is feasible, high is not
+    for _ in range(GUARD_BISECTIONS):
+        mid = 0.5 * (low + high)
+        if view_fraction_at(p, gamma + (base_rate + mid * residual_rate) * dt, prm) <= limit:
+            low = mid
+        else:
+            high = mid
+    return base_rate + low * residual_rate, True
 
 
 @njit(cache=True)
@@ -103,8 +132,7 @@ def occlusion_observe(i, Q, G, step, centre, amp, omega, phase, R_des, duration,
     m = 5 + 3 * 40 + 1
     voi, _, _, _ = voi_of_configuration(q, lengths, ws, gamma, prm.d_o, prm.alpha, prm.beta, prm.model, 5, 40,
                                         np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)))
-    xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, prm.d_o, prm.alpha, prm.model)
-    view_fraction = math.atan2(math.sqrt(xl * xl + yl * yl), zl) / prm.beta
+    view_fraction = view_fraction_at(p, gamma, prm)
     metrics[i, 0] = voi
     metrics[i, 1] = tip_error
     metrics[i, 2] = ori_error
@@ -143,11 +171,13 @@ def make_step_work(n_points):
 def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit, control_dt,
                        substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
                        rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend, weights,
-                       visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags, work):
+                       visibility_fraction, visibility_guard, base_cmd, base_info, obs, metrics, terms, rewards, flags,
+                       work):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
     flags[i] = [clamped_bits, rate_saturated, gamma_saturated, terminated, truncated, base_frozen_bits,
-    base_rate_saturated] (the base bits OR-ed over the substeps). base_cmd holds the baseline command
+    base_rate_saturated, visibility_guarded] (the base bits OR-ed over the substeps). ``visibility_guard``
+    <= 0 turns the guard off. base_cmd holds the baseline command
     at the current state on entry (cached from the last observe) and at the new state on exit.
     """
     ws, scratch, qdot, residual, projected, cmd, p_des, v_des, A, B = work
@@ -156,6 +186,7 @@ def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des,
     clamped = 0
     rate_saturated = 0
     gamma_saturated = 0
+    guarded = 0
     base_frozen = base_info[i, 0]
     base_saturated = base_info[i, 1]
     action_sq = 0.0
@@ -201,7 +232,13 @@ def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des,
             q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
             if hit:
                 clamped |= 1 << k
-        g_rate = gd + gamma_residual
+        if visibility_guard > 0.0 and gamma_residual != 0.0:
+            tip_kernel(q, lengths, ws, scratch[0], scratch[1], scratch[2])
+            g_rate, hit = guard_gamma_rate(scratch[0], G[i], gd, gamma_residual, dt, visibility_guard, prm)
+            if hit:
+                guarded = 1
+        else:
+            g_rate = gd + gamma_residual
         if g_rate > gamma_rate_limit:
             g_rate = gamma_rate_limit
             gamma_saturated = 1
@@ -231,13 +268,15 @@ def occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des,
     flags[i, 4] = 1 if step[i] >= limit[i] else 0
     flags[i, 5] = base_frozen
     flags[i, 6] = base_saturated
+    flags[i, 7] = guarded
 
 
 @njit(cache=True)
 def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, limit, control_dt,
                          substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace, residual_scale,
                          rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend, weights,
-                         visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags):
+                         visibility_fraction, visibility_guard, base_cmd, base_info, obs, metrics, terms, rewards,
+                         flags):
     """Advance every active row by one control step (serial)."""
     work = make_step_work(segments.shape[0])
     for i in range(Q.shape[0]):
@@ -245,16 +284,16 @@ def occlusion_step_batch(Q, G, step, actions, active, centre, amp, omega, phase,
             occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit, control_dt,
                                substeps, lengths, stiffness, segments, fractions, prm, has_base, nullspace,
                                residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper, max_bend,
-                               weights, visibility_fraction, base_cmd, base_info, obs, metrics, terms, rewards, flags,
-                               work)
+                               weights, visibility_fraction, visibility_guard, base_cmd, base_info, obs, metrics,
+                               terms, rewards, flags, work)
 
 
 @njit(cache=True, parallel=True)
 def occlusion_step_batch_parallel(Q, G, step, actions, active, centre, amp, omega, phase, R_des, duration, limit,
                                   control_dt, substeps, lengths, stiffness, segments, fractions, prm, has_base,
                                   nullspace, residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower, upper,
-                                  max_bend, weights, visibility_fraction, base_cmd, base_info, obs, metrics, terms,
-                                  rewards, flags, n_chunks):
+                                  max_bend, weights, visibility_fraction, visibility_guard, base_cmd, base_info, obs,
+                                  metrics, terms, rewards, flags, n_chunks):
     """As ``occlusion_step_batch``, rows split into ``n_chunks`` contiguous chunks over threads.
 
     Rows are independent and each is computed by the same row function, so results equal the serial ones.
@@ -267,8 +306,8 @@ def occlusion_step_batch_parallel(Q, G, step, actions, active, centre, amp, omeg
                 occlusion_step_row(i, Q, G, step, actions, centre, amp, omega, phase, R_des, duration, limit,
                                    control_dt, substeps, lengths, stiffness, segments, fractions, prm, has_base,
                                    nullspace, residual_scale, rate_scale_vec, rate_limit, gamma_rate_limit, lower,
-                                   upper, max_bend, weights, visibility_fraction, base_cmd, base_info, obs, metrics,
-                                   terms, rewards, flags, work)
+                                   upper, max_bend, weights, visibility_fraction, visibility_guard, base_cmd,
+                                   base_info, obs, metrics, terms, rewards, flags, work)
 
 
 @njit(cache=True)

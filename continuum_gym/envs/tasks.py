@@ -167,8 +167,8 @@ def occlusion_task_count(task: str, split: str) -> int:
 
 
 # ---------------------------------------------------------------------- view tracking
-VIEW_TASKS = ("random", "static", "case1", "case2", "coverage")
-VIEW_DURATION_S = {"random": 6.0, "static": 10.0, "case1": 10.0, "case2": 10.0, "coverage": 10.0}
+VIEW_TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
+VIEW_DURATION_S = {"random": 6.0, "static": 10.0, "pan_tilt": 10.0, "case1": 10.0, "case2": 10.0, "coverage": 10.0}
 #: Paper ranges of the da Vinci (Table II): L_dV [0, 0.1] m, yaw/pitch [-pi/3, pi/3], roll [-pi, pi].
 DAVINCI_LOWER = np.array([0.0, -math.pi / 3, -math.pi / 3, -math.pi])
 DAVINCI_UPPER = np.array([0.1, math.pi / 3, math.pi / 3, math.pi])
@@ -196,6 +196,9 @@ def view_tasks(task: str, split: str, task_ids, control_dt: float, grid: int = 2
         if task == "static":
             batch.centre[i] = [rng.uniform(0.05, 0.08), rng.uniform(-math.pi / 3, math.pi / 3),
                                rng.uniform(-math.pi / 3, math.pi / 3), rng.uniform(-math.pi / 6, math.pi / 6)]
+        elif task == "pan_tilt":  # the coverage map's distribution, drawn at random instead of on its grid
+            batch.centre[i] = [COVERAGE_INSERTION, rng.uniform(-math.pi / 3, math.pi / 3),
+                               rng.uniform(-math.pi / 3, math.pi / 3), 0.0]
         else:  # random: smooth pan/tilt/roll/zoom around a moderate start view
             start = np.array([rng.uniform(0.055, 0.075), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.3),
                               rng.uniform(-0.5, 0.5)])

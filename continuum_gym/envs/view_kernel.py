@@ -21,7 +21,9 @@ ACTION_DIM = 6
 OBS_DIM = 22
 OBS_LIMIT = 10.0
 POSITION_ERROR_SCALE = 0.05  # m
-REWARD_TERMS = ("overlap", "position", "orientation", "action")
+REWARD_TERMS = ("overlap", "position", "orientation", "action", "overlap_bonus")
+#: The coverage map's success criterion (ERRATA §2): OR above it counts as reproducing the view.
+OVERLAP_BONUS_THRESHOLD = 0.8
 N_REWARD_TERMS = len(REWARD_TERMS)
 
 
@@ -134,6 +136,7 @@ def view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limi
     terms[i, 1] = -weights[1] * metrics[i, 1] / 0.01
     terms[i, 2] = -weights[2] * metrics[i, 2]
     terms[i, 3] = -weights[3] * action_sq / 6.0
+    terms[i, 4] = weights[4] if metrics[i, 0] > OVERLAP_BONUS_THRESHOLD else 0.0
     total = 0.0
     for k in range(N_REWARD_TERMS):
         total += terms[i, k]

@@ -32,7 +32,8 @@ from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import DaVinciEndoscope
 from continuum_gym.robots.validation import positive
 
-DEFAULT_WEIGHTS = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01}
+# overlap_bonus rewards the coverage criterion itself (OR > 0.8); off by default, the paper scores OR.
+DEFAULT_WEIGHTS = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01, "overlap_bonus": 0.0}
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
 ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, math.pi])
 
@@ -50,7 +51,7 @@ class ViewTrackingCore(BatchedCore):
         self.task_split = choose(task_split, TASK_SPLITS, "task_split")
         if self.task in ("case1", "case2", "coverage") and self.task_split == "train":
             raise ValueError(f"task={self.task!r} is a fixed evaluation task of the paper: use task_split='test' "
-                             "(training draws from 'random' or 'static')")
+                             "(training draws from 'random', 'static' or 'pan_tilt')")
         if base_controller is not None:
             choose(base_controller, VIEW_TRACKING_CONTROLLERS, "base_controller")
         self.base_controller = base_controller
@@ -216,19 +217,22 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
 
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"]``): ``overlap`` = +w OR;
-    ``position`` = -w eps_p / 0.01 m; ``orientation`` = -w eps_R (rad); ``action`` = -w mean(a^2).
-    Defaults: overlap 1.0, position 0.1, orientation 0.1, action 0.01.
+    ``position`` = -w eps_p / 0.01 m; ``orientation`` = -w eps_R (rad); ``action`` = -w mean(a^2);
+    ``overlap_bonus`` = +w when OR > 0.8 (the coverage map's criterion).
+    Defaults: overlap 1.0, position 0.1, orientation 0.1, action 0.01, overlap_bonus 0.
 
     ## Starting State
     The case-study configuration Psi0 = [8 mm, 0, 0.3857, -1.57, 0.7828, 1.57] of the paper.
 
     ## Episode End
-    ``truncated`` at the task's duration (random 6 s; static, case studies and coverage 10 s, the
+    ``truncated`` at the task's duration (random 6 s; static, pan_tilt, case studies and coverage 10 s, the
     paper's T_max); ``terminated`` only if the state becomes non-finite.
 
     ## Arguments
     - ``task``: ``"random"`` (default; smooth random yaw/pitch/roll/insertion trajectories of the da Vinci
-      within the paper's ranges), ``"static"`` (random fixed views), and the paper's fixed evaluation tasks
+      within the paper's ranges), ``"static"`` (random fixed views), ``"pan_tilt"`` (random fixed views with
+      the coverage map's insertion and zero roll: its distribution, off its grid), and the paper's fixed
+      evaluation tasks
       ``"case1"``, ``"case2"``, ``"coverage"`` (test split only; ``grid`` points per axis, task id = grid index,
       yaw-major).
     - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.

@@ -26,6 +26,9 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
 OPTIMUM_CACHE = Path(__file__).resolve().parent / "data" / "optimum_cache.json"
 BASELINES = {OCCLUSION: ("minimum_norm", "projected_gradient"), VIEW: ("resolved_rate", "dimension_reduced")}
+# Env keywords that define how a policy's action acts: taken from its training config. Task keywords are not:
+# every method runs on the same test tasks.
+POLICY_ENV_KEYS = ("base_controller", "residual_scale", "residual_space", "visibility_guard")
 HEADLINE_BASE = {OCCLUSION: "projected_gradient", VIEW: "dimension_reduced"}
 # Task sets: (task name, number of instances or None for the --episodes default).
 TASK_SETS = {OCCLUSION: (("hold", None), ("random", None), ("circle", 1)),
@@ -72,8 +75,7 @@ def method_runs(env_id, policies):
         entries = []
         for run in runs:
             model, config = load_policy(run)
-            kwargs = {k: v for k, v in config.get("env_kwargs", {}).items() if k in ("base_controller", "residual_scale",
-                                                                                  "residual_space")}
+            kwargs = {k: v for k, v in config.get("env_kwargs", {}).items() if k in POLICY_ENV_KEYS}
             entries.append((model, kwargs))
         out.append((method, entries))
     return out
