@@ -179,3 +179,40 @@ def test_iqm_ignores_outliers():
     assert s["iqm"] == pytest.approx(1.0) and s["mean"] == pytest.approx(10.9)
     with pytest.raises(ValueError, match="finite"):
         summarize(np.array([[np.nan, 1.0]]))
+
+
+# ---------------------------------------------------------------- evaluation end to end
+@pytest.mark.slow
+def test_evaluate_puts_every_method_through_one_path(tmp_path):
+    """An untrained residual policy is its baseline: through the whole CLI its row must equal the baseline's."""
+    import json
+
+    policies = tmp_path / "policies"
+    for env_id, base, kwargs in ((OCCLUSION, "projected_gradient", {"residual_scale": 0.5, "visibility_guard": 0.69}),
+                                 (VIEW, "dimension_reduced", {"residual_scale": 1.0})):
+        model, _ = _model("ppo", env_id, base_controller=base, **kwargs)
+        zero_init_residual(model)
+        run = policies / env_id.split("/")[-1]
+        run.mkdir(parents=True)
+        model.save(run / "model.zip")
+        (run / "config.yml").write_text(yaml.safe_dump({"env_id": env_id, "algo": "ppo", "base_controller": base,
+                                                        "env_kwargs": {"base_controller": base, **kwargs}}))
+    out, path = tmp_path / "out", tmp_path / "results.json"
+    assert main(["evaluate", "--policies", str(policies), "--episodes", "2", "--grid", "3", "--out", str(out),
+                 "--json", str(path), "--no-progress"]) == 0
+    summary = json.loads(path.read_text())
+    metrics = {OCCLUSION: ("mean_voi", "tip_in_view_fraction", "mean_tip_error_m", "mean_orientation_error_rad"),
+               VIEW: ("mean_or", "or_above_0.8_fraction", "mean_position_error_m", "coverage_percent")}
+    for env_id, base in ((OCCLUSION, "projected_gradient"), (VIEW, "dimension_reduced")):
+        table = summary[env_id]
+        assert {base, f"residual_{base}"} <= set(table)
+        for metric in metrics[env_id]:
+            stats = table[base][metric]
+            assert set(stats) >= {"mean", "iqm", "ci_low", "ci_high"}
+            assert stats["ci_low"] <= stats["mean"] <= stats["ci_high"]
+            assert table[f"residual_{base}"][metric]["mean"] == stats["mean"]
+    # The baseline rows are the baselines themselves: a direct zero-residual rollout on the first test tasks.
+    core = make_core(OCCLUSION, 2, task="hold", task_split="test", base_controller="projected_gradient")
+    direct = run_episodes(core, ZeroResidual(8), [0, 1])
+    report = (out / "results.md").read_text()
+    assert "| projected_gradient | hold | " + f"{direct['mean_voi'].mean():.3f}" in report

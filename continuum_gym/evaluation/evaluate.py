@@ -35,6 +35,9 @@ TASK_SETS = {OCCLUSION: (("hold", None), ("random", None), ("circle", 1)),
              VIEW: (("static", None), ("random", None), ("case1", 1), ("case2", 1))}
 METRICS = {OCCLUSION: ("mean_voi", "tip_in_view_fraction", "mean_tip_error_m", "mean_orientation_error_rad"),
            VIEW: ("mean_or", "or_above_0.8_fraction", "mean_position_error_m", "coverage_percent")}
+# Per-task diagnostics shown beside the headline metrics (Markdown only): how often the visibility guard cut
+# a residual's endoscope rotation.
+TASK_DIAGNOSTICS = {OCCLUSION: ("visibility_guarded_fraction",), VIEW: ()}
 HIGHER_IS_BETTER = {"mean_voi": False, "tip_in_view_fraction": True, "mean_tip_error_m": False,
                     "mean_orientation_error_rad": False, "mean_or": True, "or_above_0.8_fraction": True,
                     "mean_position_error_m": False, "coverage_percent": True, "headroom_closed": True}
@@ -218,13 +221,14 @@ def markdown(env_id, table, results) -> str:
                 cells.append(f"{_fmt(metric, s['mean'])} [{_fmt(metric, s['ci_low'])}, {_fmt(metric, s['ci_high'])}] "
                              f"(IQM {_fmt(metric, s['iqm'])})")
         lines.append(f"| {method} | " + " | ".join(cells) + " |")
+    columns = METRICS[env_id][:3] + TASK_DIAGNOSTICS[env_id]
     lines += ["", "Per task set (mean over seeds and episodes):", "",
-              "| method | task | " + " | ".join(METRICS[env_id][:3]) + " |", "|---|---|" + "---|" * 3]
+              "| method | task | " + " | ".join(columns) + " |", "|---|---|" + "---|" * len(columns)]
     for method, tasks in results.items():
         for task, t in tasks.items():
             if task == "coverage":
                 continue
-            values = [_fmt(m, float(np.mean(np.stack(t["scores"][m])))) for m in METRICS[env_id][:3]]
+            values = [_fmt(m, float(np.mean(np.stack(t["scores"][m])))) for m in columns]
             lines.append(f"| {method} | {task} | " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 

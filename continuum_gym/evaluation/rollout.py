@@ -64,7 +64,8 @@ def run_episodes(core, policy, task_ids, progress=None, record=False) -> dict:
         info = core.info()
         if occlusion:
             step_metrics = {"voi": info["voi"], "in_view": (info["tip_view_fraction"] <= VISIBILITY_FRACTION) * 1.0,
-                            "tip_error": info["tip_error_m"], "orientation_error": info["orientation_error_rad"]}
+                            "tip_error": info["tip_error_m"], "orientation_error": info["orientation_error_rad"],
+                            "guarded": info["visibility_guarded"] * 1.0}
         else:
             step_metrics = {"or": info["overlap_ratio"], "or_above": (info["overlap_ratio"] > 0.8) * 1.0,
                             "position_error": info["position_error_m"]}
@@ -83,7 +84,8 @@ def run_episodes(core, policy, task_ids, progress=None, record=False) -> dict:
     mean = {key: value / np.maximum(counts, 1) for key, value in sums.items()}
     if occlusion:
         out = {"mean_voi": mean["voi"], "tip_in_view_fraction": mean["in_view"], "mean_tip_error_m": mean["tip_error"],
-               "mean_orientation_error_rad": mean["orientation_error"]}
+               "mean_orientation_error_rad": mean["orientation_error"],
+               "visibility_guarded_fraction": mean["guarded"]}
     else:
         out = {"mean_or": mean["or"], "or_above_0.8_fraction": mean["or_above"],
                "mean_position_error_m": mean["position_error"], "final_or": final["or"]}
