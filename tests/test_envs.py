@@ -148,8 +148,9 @@ def test_zero_residual_reproduces_the_projected_gradient_exactly(task):
     assert np.array_equal(np.array(gammas), g_ref[::core.substeps])
 
 
-def test_zero_residual_reproduces_dimension_reduced_exactly():
-    env = ViewTrackingEnv(task="case2", task_split="test")
+@pytest.mark.parametrize("residual_space", ["joint", "target"])
+def test_zero_residual_reproduces_dimension_reduced_exactly(residual_space):
+    env = ViewTrackingEnv(task="case2", task_split="test", residual_space=residual_space)
     env.reset(seed=0)
     core = env.core
     history = [core.q[0].copy()]
@@ -161,6 +162,48 @@ def test_zero_residual_reproduces_dimension_reduced_exactly():
     n = int(solved["steps"]) + 1
     assert n > 50
     assert np.array_equal(np.array(history)[:n], solved["history"][:n])
+
+
+def test_target_residual_is_dimension_reduced_towards_the_moved_target():
+    """A constant target-space action: the env's steps are DR's own steps towards the shifted, turned target."""
+    from scipy.spatial.transform import Rotation
+
+    env = ViewTrackingEnv(task="case2", task_split="test", residual_space="target", residual_scale=0.5)
+    env.reset(seed=0)
+    core = env.core
+    action = np.array([0.4, -0.3, 0.2, 0.1, -0.2, 0.3], dtype=np.float32)
+    history = [core.q[0].copy()]
+    for _ in range(100):
+        env.step(action)
+        history.append(core.q[0].copy())
+    p, R = core.davinci.target_pose(core.davinci_configuration(0))
+    a = action.astype(np.float64) * 0.5
+    moved = (p + 0.02 * a[:3], Rotation.from_rotvec(0.5 * a[3:]).as_matrix() @ R)
+    solved = DimensionReduced().solve(history[0], moved, max_steps=100, record=True)
+    # The moved frame is built by scipy here and by the kernel's Rodrigues there: equal to rounding, which the
+    # IK near its limits amplifies after ~50 steps; before that the two paths agree to 1e-10.
+    np.testing.assert_allclose(np.array(history)[:50], solved["history"][:50], rtol=0, atol=1e-10)
+    # It did go somewhere else than the unmoved baseline would.
+    plain = DimensionReduced().solve(history[0], (p, R), max_steps=100)
+    assert np.abs(plain["q"] - history[-1]).max() > 1e-3
+
+
+def test_rotation_exp_matches_scipy_and_inverts_the_log():
+    from scipy.spatial.transform import Rotation
+
+    from continuum_gym.robots.rotations import rotation_exp, rotation_log
+
+    rng = np.random.default_rng(0)
+    directions = rng.normal(size=(200, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    vectors = np.concatenate([directions * rng.uniform(0, 3.1, (200, 1)),  # the log's range: angles below pi
+                              rng.normal(size=(20, 3)) * 1e-10, np.zeros((1, 3))])
+    out, back = np.empty((3, 3)), np.empty(3)
+    for w in vectors:
+        rotation_exp(w, out)
+        np.testing.assert_allclose(out, Rotation.from_rotvec(w).as_matrix(), rtol=0, atol=1e-14)
+        rotation_log(out, back)
+        np.testing.assert_allclose(back, w, rtol=0, atol=1e-12)
 
 
 # ---------------------------------------------------------------- rewards and info
@@ -310,6 +353,8 @@ def test_train_and_test_tasks_are_disjoint():
     (VIEW, {"base_controller": "projected_gradient"}, "base_controller"),
     (VIEW, {"residual_scale": -0.1}, "residual_scale"),
     (VIEW, {"rate_limits": [1, 1, 1]}, "rate_limits"),
+    (VIEW, {"residual_space": "nullspace"}, "residual_space"),
+    (VIEW, {"residual_space": "target", "base_controller": None}, "residual_space"),
 ])
 def test_bad_keywords_raise(env_id, kwargs, name):
     with pytest.raises(ValueError, match=name):

@@ -16,11 +16,15 @@ from numba import njit, prange
 from continuum_gym.baselines.view_tracking import integrate_view_step, make_view_scratch, view_errors, view_rates_kernel
 from continuum_gym.envs.common_kernels import clip_observation, trajectory_point
 from continuum_gym.geometry.overlap import overlap_ratio_nb
+from continuum_gym.robots.rotations import rotation_exp
 
 ACTION_DIM = 6
 OBS_DIM = 22
 OBS_LIMIT = 10.0
 POSITION_ERROR_SCALE = 0.05  # m
+#: Target-space residual at action 1.0 (times residual_scale): shift of the target point (m) and rotation of
+#: the target frame (rad), both in {w}.
+TARGET_SHIFT_SCALE = np.array([0.02, 0.5])
 REWARD_TERMS = ("overlap", "position", "orientation", "action", "overlap_bonus")
 #: The coverage map's success criterion (ERRATA §2): OR above it counts as reproducing the view.
 OVERLAP_BONUS_THRESHOLD = 0.8
@@ -103,24 +107,55 @@ def view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, ge
 
 @njit(cache=True)
 def make_view_step_work():
-    return make_view_scratch(), np.empty(6), np.empty(6)
+    return (make_view_scratch(), np.empty(6), np.empty(6), np.empty(4), np.empty(4), np.empty(3), np.empty((3, 3)),
+            np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+
+
+@njit(cache=True)
+def target_residual_rates(i, q, t, actions, centre, amp, omega, phase, control_dt, geom, prm, residual_scale,
+                          target_scale, dv_alpha, dv_Le, dv_lower, dv_upper, work, cmd):
+    """The baseline's joint rates towards the da Vinci target moved by the action (target-space residual).
+
+    The target point moves by a[0:3] * residual_scale * target_scale[0] (m) and the target frame turns by
+    exp([a[3:6] * residual_scale * target_scale[1]]) (rad), both in {w}.
+    """
+    scratch, _, _, q_dv, dv_rate, p_dv, R_dv, p_tgt, w, turn, R_goal = work
+    trajectory_point(centre[i], amp[i], omega[i], phase[i], t, q_dv, dv_rate)
+    davinci_pose(q_dv, dv_alpha, dv_Le, dv_lower, dv_upper, p_dv, R_dv, p_tgt)
+    for a in range(3):
+        p_tgt[a] += actions[i, a] * residual_scale * target_scale[0]
+        w[a] = actions[i, 3 + a] * residual_scale * target_scale[1]
+    rotation_exp(w, turn)
+    for a in range(3):
+        for b in range(3):
+            R_goal[a, b] = turn[a, 0] * R_dv[0, b] + turn[a, 1] * R_dv[1, b] + turn[a, 2] * R_dv[2, b]
+    view_rates_kernel(q, p_tgt, R_goal, control_dt, geom, prm, scratch, cmd)
 
 
 @njit(cache=True)
 def view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm, has_base,
-                  residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far,
-                  weights, base_cmd, obs, metrics, terms, rewards, flags, work):
+                  residual_scale, target_space, target_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower,
+                  dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags, work):
     """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for row i.
 
     flags[i] = [clamped_bits, rate_saturated, terminated, truncated].
     """
-    scratch, cmd, q_new = work
+    scratch, cmd, q_new = work[0], work[1], work[2]
     q = Q[i]
     action_sq = 0.0
-    scale = 1.0
     for k in range(6):
         action_sq += actions[i, k] * actions[i, k]
-        cmd[k] = base_cmd[i, k] + actions[i, k] * residual_scale * action_scale[k]
+    if target_space and action_sq > 0.0:
+        target_residual_rates(i, q, step[i] * control_dt, actions, centre, amp, omega, phase, control_dt, geom, prm,
+                              residual_scale, target_scale, dv_alpha, dv_Le, dv_lower, dv_upper, work, cmd)
+    elif target_space:  # a zero target residual is the baseline's cached command, bit for bit
+        for k in range(6):
+            cmd[k] = base_cmd[i, k]
+    else:
+        for k in range(6):
+            cmd[k] = base_cmd[i, k] + actions[i, k] * residual_scale * action_scale[k]
+    scale = 1.0
+    for k in range(6):
         if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
             scale = rate_limit[k] / abs(cmd[k])
     if scale < 1.0:
@@ -149,30 +184,31 @@ def view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limi
 
 @njit(cache=True)
 def view_step_batch(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
-                    has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper, tan_half,
-                    near, far, weights, base_cmd, obs, metrics, terms, rewards, flags):
+                    has_base, residual_scale, target_space, target_scale, action_scale, rate_limit, dv_alpha, dv_Le,
+                    dv_lower, dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags):
     work = make_view_step_work()
     for i in range(Q.shape[0]):
         if active[i] != 0:
             view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
-                          has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower, dv_upper,
-                          tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags, work)
+                          has_base, residual_scale, target_space, target_scale, action_scale, rate_limit, dv_alpha,
+                          dv_Le, dv_lower, dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms,
+                          rewards, flags, work)
 
 
 @njit(cache=True, parallel=True)
 def view_step_batch_parallel(Q, step, actions, active, centre, amp, omega, phase, duration, limit, control_dt, geom,
-                             prm, has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower,
-                             dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags,
-                             n_chunks):
+                             prm, has_base, residual_scale, target_space, target_scale, action_scale, rate_limit,
+                             dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics,
+                             terms, rewards, flags, n_chunks):
     n = Q.shape[0]
     for chunk in prange(n_chunks):
         work = make_view_step_work()
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             if active[i] != 0:
                 view_step_row(i, Q, step, actions, centre, amp, omega, phase, duration, limit, control_dt, geom, prm,
-                              has_base, residual_scale, action_scale, rate_limit, dv_alpha, dv_Le, dv_lower,
-                              dv_upper, tan_half, near, far, weights, base_cmd, obs, metrics, terms, rewards, flags,
-                              work)
+                              has_base, residual_scale, target_space, target_scale, action_scale, rate_limit,
+                              dv_alpha, dv_Le, dv_lower, dv_upper, tan_half, near, far, weights, base_cmd, obs,
+                              metrics, terms, rewards, flags, work)
 
 
 @njit(cache=True)

@@ -24,6 +24,7 @@ from continuum_gym.envs.view_kernel import (
     OBS_DIM,
     OBS_LIMIT,
     REWARD_TERMS,
+    TARGET_SHIFT_SCALE,
     view_observe_batch,
     view_step_batch,
     view_step_batch_parallel,
@@ -36,6 +37,9 @@ from continuum_gym.robots.validation import positive
 DEFAULT_WEIGHTS = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01, "overlap_bonus": 0.0}
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
 ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, math.pi])
+# "joint": the action is added to the baseline's joint rates (6 joints, 6-D task: no null space to project
+# into); "target": the action moves the target the baseline tracks (see TARGET_SHIFT_SCALE).
+RESIDUAL_SPACES = ("joint", "target")
 
 
 class ViewTrackingCore(BatchedCore):
@@ -55,8 +59,9 @@ class ViewTrackingCore(BatchedCore):
         if base_controller is not None:
             choose(base_controller, VIEW_TRACKING_CONTROLLERS, "base_controller")
         self.base_controller = base_controller
-        if residual_space != "joint":
-            raise ValueError("residual_space must be 'joint' for ViewTracking (6 joints, 6-D task: no null space)")
+        self.residual_space = choose(residual_space, RESIDUAL_SPACES, "residual_space")
+        if self.residual_space == "target" and base_controller is None:
+            raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
         for name, value in (("max_bend", max_bend), ("lens_model", lens_model)):
             if value is not None:
                 raise ValueError(f"{name} applies to OcclusionAvoidance only; ViewTracking uses the paper's limits")
@@ -101,8 +106,9 @@ class ViewTrackingCore(BatchedCore):
         self._step_args = (
             self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.duration,
             self.limit, self.control_dt, self.robot._geom, self.controller.params, has_base,
-            self.residual_scale if has_base else 1.0, ACTION_SCALE, self.rate_limits, *g[:4], *g[5:], self._weights,
-            self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
+            self.residual_scale if has_base else 1.0, self.residual_space == "target", TARGET_SHIFT_SCALE, ACTION_SCALE,
+            self.rate_limits, *g[:4], *g[5:], self._weights, self.base_cmd, self.obs, self.metrics, self.terms,
+            self.rewards, self.flags)
 
     def _geometry_args(self):
         f = self.frustum
@@ -198,6 +204,13 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     (0.1 m/s, pi/2, pi/2, pi, pi/2, pi rad/s), times ``residual_scale`` (residual) or 1 (pure RL).
     Out-of-range actions are clipped (``info["action_clipped"]``); NaN/inf raise ``ValueError``.
 
+    With ``residual_space="target"`` the action moves the target the baseline tracks instead: the da
+    Vinci target point shifts by a[0:3] x 0.02 m and the target frame turns by the rotation vector
+    a[3:6] x 0.5 rad (both in {w}, times ``residual_scale``); the baseline's IK step then runs towards
+    that moved target. Dimension-reduced IK corrects its whole pose error every step, so a joint-rate
+    residual moves its equilibrium by only about residual_scale x 0.02 rad; a target residual can hold
+    the robot at any pose the baseline can reach. A zero action is the baseline exactly in both spaces.
+
     ## Observation Space
     ``Box(-10, 10, (22,), float32)``, each entry clipped to +-10:
 
@@ -237,7 +250,8 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
       yaw-major).
     - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
     - ``base_controller``: ``"dimension_reduced"`` (default), ``"resolved_rate"`` or ``None``.
-    - ``residual_scale`` (0.3), ``residual_space`` (``"joint"`` only), ``reward_weights``, ``control_dt`` (0.01 s),
+    - ``residual_scale`` (0.3), ``residual_space`` (``"joint"`` or ``"target"``), ``reward_weights``,
+      ``control_dt`` (0.01 s),
       ``substeps`` (1), ``rate_limits`` (None: the paper has none; 6 values in m/s, rad/s to add them).
     - Joint limits of the paper (Table II): L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4],
       theta2 in [0, pi/2]; deltas wrapped to [-pi, pi). Clamping is reported in ``info["clamped_joints"]``.

@@ -58,6 +58,26 @@ def rotation_log(R, out):
 
 
 @njit(cache=True)
+def rotation_exp(w, out):
+    """Rotation matrix of the rotation vector w (axis * angle, rad) into ``out`` (Rodrigues)."""
+    angle = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    if angle < 1e-8:  # second-order series: exact to rounding below this angle
+        a, b = 1.0 - angle * angle / 6.0, 0.5 - angle * angle / 24.0
+    else:
+        a, b = math.sin(angle) / angle, (1.0 - math.cos(angle)) / (angle * angle)
+    x, y, z = w[0], w[1], w[2]
+    out[0, 0] = 1.0 - b * (y * y + z * z)
+    out[1, 1] = 1.0 - b * (x * x + z * z)
+    out[2, 2] = 1.0 - b * (x * x + y * y)
+    out[0, 1] = b * x * y - a * z
+    out[1, 0] = b * x * y + a * z
+    out[0, 2] = b * x * z + a * y
+    out[2, 0] = b * x * z - a * y
+    out[1, 2] = b * y * z - a * x
+    out[2, 1] = b * y * z + a * x
+
+
+@njit(cache=True)
 def orientation_error(R_des, R, work, out):
     """log(R_des R^T) (rad), the world-frame rotation that takes R to R_des (ERRATA §1.3 item 11)."""
     for a in range(3):
