@@ -4,7 +4,8 @@
 
 JSON keys (steps per second): ``single.<id>``, ``cartpole``, ``sync64.<id>``, ``native.<id>.<N>``, plus
 ``profile.<id>`` (microseconds per step spent in the compiled kernel, the core wrapper, the env API and
-Gymnasium's wrappers) and ``memory.native4096.<id>`` (MiB added by a 4096-robot vector env).
+Gymnasium's wrappers), ``memory.native4096.<id>`` (MiB added by a 4096-robot vector env) and
+``guard.off`` / ``guard.on`` (OcclusionAvoidance N=64 under random residual actions, visibility guard off / on).
 """
 
 from __future__ import annotations
@@ -53,6 +54,23 @@ def vector_rate(venv, n, seconds):
     venv.reset(seed=0)
     zero = np.zeros((n,) + venv.single_action_space.shape, dtype=np.float32)
     return rate(lambda: venv.step(zero), seconds) * n
+
+
+def guard_cost(seconds, n=64):
+    """OcclusionAvoidance native N=64 under random residual actions, visibility guard on vs off (same run).
+
+    Zero actions never reach the guard; a residual that turns the endoscope does, at every substep.
+    """
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (256, n, 8)).astype(np.float32)
+    out = {}
+    for guard in (None, 0.69):
+        venv = gym.make_vec("ContinuumGym/OcclusionAvoidance-v0", num_envs=n, vectorization_mode="vector_entry_point",
+                            visibility_guard=guard)
+        venv.reset(seed=0)
+        counter = iter(range(10**9))
+        out[guard] = rate(lambda: venv.step(actions[next(counter) % 256]), seconds) * n
+    return out[None], out[0.69]
 
 
 def rss_now_mib():
@@ -110,6 +128,11 @@ def main(argv=None) -> int:
         big.step(np.zeros((4096,) + big.single_action_space.shape, dtype=np.float32))
         results[f"memory.native4096.{env_id}"] = rss_now_mib() - before
         del big
+    unguarded, guarded = guard_cost(seconds)
+    results["guard.off"], results["guard.on"] = unguarded, guarded
+    rows.append(("ContinuumGym/OcclusionAvoidance-v0", "N=64 random actions, guard off", f"{unguarded:,.0f}", "1.00x"))
+    rows.append(("ContinuumGym/OcclusionAvoidance-v0", "N=64 random actions, guard on", f"{guarded:,.0f}",
+                 f"{guarded / unguarded:.2f}x"))
     print_table(rows, ["environment", "mode", "steps/s", "relative"])
     for env_id in continuum_gym.ENV_IDS:
         p = results[f"profile.{env_id}"]
