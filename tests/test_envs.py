@@ -257,6 +257,27 @@ def test_pan_tilt_task_draws_the_coverage_distribution_off_its_grid():
     assert np.abs(centres["train"][:, None] - centres["test"][None]).max(axis=-1).min() > 1e-9
 
 
+def test_observe_target_appends_the_da_vinci_configuration_and_changes_nothing_else():
+    plain = ViewTrackingEnv(task="random")
+    extended = ViewTrackingEnv(task="random", observe_target=True)
+    assert extended.observation_space.shape == (27,)
+    gym_check_env(extended, skip_render_check=True)
+    sb3_check_env(ViewTrackingEnv(task="random", observe_target=True), warn=True)
+    obs_a, _ = plain.reset(seed=4)
+    obs_b, _ = extended.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(60):
+        np.testing.assert_array_equal(obs_a, obs_b[:22])
+        q_dv = extended.unwrapped.core.davinci_configuration(0)
+        expected = [(q_dv[0] - 0.05) / 0.05, q_dv[1] / (math.pi / 3), q_dv[2] / (math.pi / 3), math.sin(q_dv[3]),
+                    math.cos(q_dv[3])]
+        np.testing.assert_allclose(obs_b[22:], expected, atol=1e-6)
+        action = rng.uniform(-1, 1, 6).astype(np.float32)
+        obs_a, reward_a, *_ = plain.step(action)
+        obs_b, reward_b, *_ = extended.step(action)
+        assert reward_a == reward_b
+
+
 def test_occlusion_info_reports_metrics_and_saturation():
     env = OcclusionAvoidanceEnv(base_controller=None, task="hold")
     env.reset(seed=0)
@@ -355,6 +376,7 @@ def test_train_and_test_tasks_are_disjoint():
     (VIEW, {"rate_limits": [1, 1, 1]}, "rate_limits"),
     (VIEW, {"residual_space": "nullspace"}, "residual_space"),
     (VIEW, {"residual_space": "target", "base_controller": None}, "residual_space"),
+    (VIEW, {"observe_target": "yes"}, "observe_target"),
 ])
 def test_bad_keywords_raise(env_id, kwargs, name):
     with pytest.raises(ValueError, match=name):

@@ -20,6 +20,8 @@ from continuum_gym.robots.rotations import rotation_exp
 
 ACTION_DIM = 6
 OBS_DIM = 22
+#: Extra entries with ``observe_target``: the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll].
+TARGET_OBS_DIM = 5
 OBS_LIMIT = 10.0
 POSITION_ERROR_SCALE = 0.05  # m
 #: Target-space residual at action 1.0 (times residual_scale): shift of the target point (m) and rotation of
@@ -102,6 +104,12 @@ def view_observe(i, Q, step, centre, amp, omega, phase, duration, control_dt, ge
     for k in range(6):
         o[15 + k] = base_cmd[i, k] / action_scale[k]
     o[21] = t / (duration[i] * control_dt)
+    if o.shape[0] > OBS_DIM:  # observe_target
+        o[22] = (min(max(q_dv[0], dv_lower[0]), dv_upper[0]) - 0.05) / 0.05
+        o[23] = min(max(q_dv[1], dv_lower[1]), dv_upper[1]) / (math.pi / 3)
+        o[24] = min(max(q_dv[2], dv_lower[2]), dv_upper[2]) / (math.pi / 3)
+        o[25] = math.sin(q_dv[3])
+        o[26] = math.cos(q_dv[3])
     clip_observation(o, OBS_LIMIT)
 
 

@@ -22,6 +22,7 @@ from continuum_gym.envs.tasks import DAVINCI_LOWER, DAVINCI_UPPER, VIEW_TASKS, v
 from continuum_gym.envs.view_kernel import (
     ACTION_DIM,
     OBS_DIM,
+    TARGET_OBS_DIM,
     OBS_LIMIT,
     REWARD_TERMS,
     TARGET_SHIFT_SCALE,
@@ -49,7 +50,7 @@ class ViewTrackingCore(BatchedCore):
 
     def __init__(self, num_envs=1, task="random", task_split="train", base_controller="dimension_reduced",
                  residual_scale=0.3, reward_weights=None, control_dt=0.01, substeps=1, rate_limits=None, grid=21,
-                 max_episode_steps=None, residual_space="joint", max_bend=None, lens_model=None):
+                 max_episode_steps=None, residual_space="joint", max_bend=None, lens_model=None, observe_target=False):
         self.num_envs = int(num_envs)
         self.task = choose(task, VIEW_TASKS, "task")
         self.task_split = choose(task_split, TASK_SPLITS, "task_split")
@@ -86,12 +87,16 @@ class ViewTrackingCore(BatchedCore):
                 raise ValueError("rate_limits must be 6 positive joint-rate limits (m/s for L0, rad/s) or None")
         self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self.task_count = view_task_count(self.task, self.grid)
-        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (OBS_DIM,), np.float32)
+        if not isinstance(observe_target, (bool, np.bool_)):
+            raise ValueError(f"observe_target must be True or False; got {observe_target!r}")
+        self.observe_target = bool(observe_target)
+        obs_dim = OBS_DIM + (TARGET_OBS_DIM if self.observe_target else 0)
+        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         n = self.num_envs
         self.q = np.zeros((n, 6))
         self.steps = np.zeros(n, dtype=np.int64)
-        self.obs = np.zeros((n, OBS_DIM))
+        self.obs = np.zeros((n, obs_dim))
         self.base_cmd = np.zeros((n, ACTION_DIM))
         self.metrics = np.zeros((n, 3))
         self.terms = np.zeros((n, len(REWARD_TERMS)))
@@ -212,7 +217,7 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     the robot at any pose the baseline can reach. A zero action is the baseline exactly in both spaces.
 
     ## Observation Space
-    ``Box(-10, 10, (22,), float32)``, each entry clipped to +-10:
+    ``Box(-10, 10, (22,), float32)`` (27 with ``observe_target=True``), each entry clipped to +-10:
 
     | Num | Observation | Scale |
     |-----|-------------|-------|
@@ -227,6 +232,9 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     | 14 | overlap ratio | - |
     | 15-20 | baseline command at this state | / action scale |
     | 21 | elapsed time | / task duration |
+    | 22 | da Vinci insertion L_dV (only with ``observe_target``) | (L_dV - 0.05 m) / 0.05 m |
+    | 23-24 | da Vinci yaw, pitch (only with ``observe_target``) | / (pi/3) |
+    | 25-26 | sin, cos of the da Vinci roll (only with ``observe_target``) | - |
 
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"]``): ``overlap`` = +w OR;
@@ -250,6 +258,8 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
       yaw-major).
     - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
     - ``base_controller``: ``"dimension_reduced"`` (default), ``"resolved_rate"`` or ``None``.
+    - ``observe_target`` (False): append the da Vinci configuration that defines the target (the commanded
+      view, which a surgeon's console knows); the pose errors alone define it only through the kinematics.
     - ``residual_scale`` (0.3), ``residual_space`` (``"joint"`` or ``"target"``), ``reward_weights``,
       ``control_dt`` (0.01 s),
       ``substeps`` (1), ``rate_limits`` (None: the paper has none; 6 values in m/s, rad/s to add them).

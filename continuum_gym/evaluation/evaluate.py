@@ -28,7 +28,7 @@ OPTIMUM_CACHE = Path(__file__).resolve().parent / "data" / "optimum_cache.json"
 BASELINES = {OCCLUSION: ("minimum_norm", "projected_gradient"), VIEW: ("resolved_rate", "dimension_reduced")}
 # Env keywords that define how a policy's action acts: taken from its training config. Task keywords are not:
 # every method runs on the same test tasks.
-POLICY_ENV_KEYS = ("base_controller", "residual_scale", "residual_space", "visibility_guard")
+POLICY_ENV_KEYS = ("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target")
 HEADLINE_BASE = {OCCLUSION: "projected_gradient", VIEW: "dimension_reduced"}
 # Task sets: (task name, number of instances or None for the --episodes default).
 TASK_SETS = {OCCLUSION: (("hold", None), ("random", None), ("circle", 1)),
