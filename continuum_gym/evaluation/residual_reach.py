@@ -1,0 +1,109 @@
+"""How much of the view-tracking optimum a joint-rate residual of a given scale can reach and hold.
+
+The residual env commands ``base + residual_scale * ACTION_SCALE * a`` with |a| <= 1. Dimension-reduced
+IK keeps pulling towards its own pose fit, so a configuration q can be held only if the baseline's rate
+there fits inside the residual's reach: its *hold effort* max_k |base_k(q)| / (residual_scale *
+ACTION_SCALE_k) must be <= 1. :func:`reach_ceiling` moves every optimum the residual cannot hold to the
+best-OR configuration it can hold, which is the coverage a perfect residual policy of that scale gets.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from continuum_gym.baselines.registry import make_controller
+from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD, coverage_grid
+from continuum_gym.baselines.view_tracking import make_view_scratch, view_rates_kernel
+from continuum_gym.evaluation.optimum import _or_one, view_tracking_optimum
+from continuum_gym.geometry.frustum import Frustum
+from continuum_gym.robots import DaVinciEndoscope
+from continuum_gym.robots.validation import positive
+
+#: The residual env's control step (s): the baseline's rate depends on it through its capped twist.
+CONTROL_DT = 0.01
+# Nelder-Mead on -OR + PENALTY * max(0, effort - HOLD_MARGIN): the margin keeps the result strictly holdable.
+HOLD_MARGIN = 0.9
+PENALTY = 5.0
+
+
+def hold_effort(q, q_davinci, residual_scale, controller=None, control_dt=CONTROL_DT):
+    """Hold effort of each configuration (n,): the largest |action| that cancels the baseline's rate at q.
+
+    Args:
+        q: configurations (n, 6) [L0 (m), phi, theta1, delta1, theta2, delta2 (rad)].
+        q_davinci: the da Vinci configurations (n, 4) [L_dV (m), yaw, pitch, roll] defining each target.
+        residual_scale: the env's ``residual_scale`` (> 0).
+        controller: the base controller (default dimension-reduced IK).
+        control_dt: control step (s).
+    """
+    from continuum_gym.envs.view_tracking import ACTION_SCALE
+
+    residual_scale = positive(residual_scale, "residual_scale", "fraction of the action scale")
+    controller = make_controller("dimension_reduced") if controller is None else controller
+    q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+    p_t, R_t = DaVinciEndoscope().target_pose(np.atleast_2d(q_davinci))
+    scratch, rates = make_view_scratch(), np.empty(6)
+    reach = residual_scale * ACTION_SCALE
+    out = np.empty(len(q))
+    for k in range(len(q)):
+        view_rates_kernel(q[k], p_t[k], R_t[k], control_dt, controller.robot._geom, controller.params, scratch, rates)
+        out[k] = np.max(np.abs(rates) / reach)
+    return out
+
+
+def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restarts=3, seed=0):
+    """Replace each configuration the residual cannot hold by the best-OR one it can hold nearby.
+
+    Nelder-Mead from q* (and ``restarts - 1`` starts jittered by 0.05) within the joint limits; a result
+    replaces q* only if it is holdable. Returns (q (n, 6), OR (n,), hold effort (n,)).
+    """
+    controller = make_controller("dimension_reduced") if controller is None else controller
+    q_davinci = np.atleast_2d(q_davinci)
+    frustum = Frustum()
+    p_a, R_a = DaVinciEndoscope().forward_kinematics(q_davinci)
+    geom = controller.robot._geom
+    lower, upper = controller.robot.joint_limits
+    rng = np.random.default_rng(seed)
+    q_out = np.array(q_star, dtype=float)
+
+    def overlap(q, k):
+        return _or_one(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], geom, frustum.tan_half, frustum.near,
+                       frustum.far)
+
+    def effort(q, k):
+        return hold_effort(q, q_davinci[k:k + 1], residual_scale, controller)[0]
+
+    from scipy.optimize import minimize
+
+    efforts = hold_effort(q_out, q_davinci, residual_scale, controller)
+    for k in np.flatnonzero(efforts > 1.0):
+        def objective(q, k=k):
+            q = np.clip(q, lower, upper)
+            return -overlap(q, k) + PENALTY * max(0.0, effort(q, k) - HOLD_MARGIN)
+
+        starts = [q_out[k]] + [q_out[k] + rng.normal(0.0, 0.05, 6) for _ in range(restarts - 1)]
+        best = min((minimize(objective, x0, method="Nelder-Mead",
+                             options={"maxfev": 1500, "xatol": 1e-6, "fatol": 1e-8}) for x0 in starts),
+                   key=lambda result: result.fun)
+        candidate = np.clip(best.x, lower, upper)
+        if effort(candidate, k) <= 1.0:
+            q_out[k] = candidate
+            efforts[k] = effort(candidate, k)
+    overlaps = np.array([overlap(q_out[k], k) for k in range(len(q_out))])
+    return q_out, overlaps, efforts
+
+
+def reach_ceiling(residual_scales, grid=21, effort="quick", workers=2, progress=True) -> dict:
+    """Coverage (%) of the paper's grid that a perfect joint-rate residual of each scale reaches and holds.
+
+    Returns {"optimum_percent": ..., "ceiling_percent": {scale: ...}}: a point counts if its holdable
+    optimum has OR > 0.8 and hold effort <= 1.
+    """
+    q_davinci = coverage_grid(grid)
+    optimum = view_tracking_optimum(q_davinci, effort=effort, workers=workers, progress=progress)
+    result = {"optimum_percent": float(np.mean(optimum["overlap"] > COVERAGE_THRESHOLD) * 100), "ceiling_percent": {}}
+    for scale in residual_scales:
+        _, overlaps, efforts = holdable_optimum(optimum["q"], q_davinci, scale)
+        held = (overlaps > COVERAGE_THRESHOLD) & (efforts <= 1.0)
+        result["ceiling_percent"][float(scale)] = float(np.mean(held) * 100)
+    return result
