@@ -216,3 +216,17 @@ def test_evaluate_puts_every_method_through_one_path(tmp_path):
     direct = run_episodes(core, ZeroResidual(8), [0, 1])
     report = (out / "results.md").read_text()
     assert "| projected_gradient | hold | " + f"{direct['mean_voi'].mean():.3f}" in report
+
+
+def test_linear_schedules_decay_to_zero_survive_pickling_and_reject_garbage():
+    import pickle
+
+    from continuum_gym.agents.train import linear_schedule
+
+    schedule = linear_schedule("lin_2.0e-4", "learning_rate")
+    assert schedule(1.0) == pytest.approx(2e-4) and schedule(0.25) == pytest.approx(5e-5) and schedule(0.0) == 0.0
+    assert pickle.loads(pickle.dumps(schedule))(0.5) == pytest.approx(1e-4)  # SB3 saves it inside model.zip
+    assert linear_schedule(3e-4, "learning_rate") == 3e-4
+    for bad in ("exp_1e-3", "lin_fast", "lin_-1"):
+        with pytest.raises(ValueError, match="learning_rate"):
+            linear_schedule(bad, "learning_rate")

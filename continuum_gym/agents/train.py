@@ -33,6 +33,8 @@ HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
             "checkpoint_freq", "policy", "action_noise_std", "normalize_reward")
 EVAL_TASK_OFFSET = 0
+# Hyperparameters that may be given as rl-zoo's linear schedules, "lin_<initial value>".
+SCHEDULE_KEYS = ("learning_rate", "clip_range")
 
 
 def run_name(env_id: str, algo: str, base, seed: int) -> str:
@@ -49,6 +51,34 @@ def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
     if env_id not in table:
         raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {sorted(k for k in table if k != 'default')}")
     return dict(table[env_id])
+
+
+def linear_schedule(value, name):
+    """rl-zoo's ``lin_<x>``: decay linearly from x to 0 over the run (SB3 passes the remaining fraction)."""
+    if not isinstance(value, str):
+        return value
+    if not value.startswith("lin_"):
+        raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}")
+    try:
+        initial = float(value[4:])
+    except ValueError:
+        raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}") from None
+    if not initial > 0:
+        raise ValueError(f"{name}: the initial value of {value!r} must be > 0")
+    return _LinearSchedule(initial)
+
+
+class _LinearSchedule:
+    """Picklable (SB3 saves schedules with the model) linear decay to 0."""
+
+    def __init__(self, initial):
+        self.initial = initial
+
+    def __call__(self, progress_remaining):
+        return progress_remaining * self.initial
+
+    def __repr__(self):
+        return f"lin_{self.initial!r}"
 
 
 def validate(env_id, algo, base):
@@ -214,7 +244,7 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
             venv = VecNormalize.load(str(normalizer_path), venv)
         else:
             venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=float(hp.get("gamma", 0.99)))
-    algo_kwargs = {k: v for k, v in hp.items() if k not in RUN_KEYS}
+    algo_kwargs = {k: linear_schedule(v, k) if k in SCHEDULE_KEYS else v for k, v in hp.items() if k not in RUN_KEYS}
     if algo == "td3" and hp.get("action_noise_std"):
         dim = venv.action_space.shape[0]
         algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), float(hp["action_noise_std"]) * np.ones(dim))
