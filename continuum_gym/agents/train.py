@@ -65,20 +65,9 @@ def linear_schedule(value, name):
         raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}") from None
     if not initial > 0:
         raise ValueError(f"{name}: the initial value of {value!r} must be > 0")
-    return _LinearSchedule(initial)
+    from stable_baselines3.common.utils import LinearSchedule
 
-
-class _LinearSchedule:
-    """Picklable (SB3 saves schedules with the model) linear decay to 0."""
-
-    def __init__(self, initial):
-        self.initial = initial
-
-    def __call__(self, progress_remaining):
-        return progress_remaining * self.initial
-
-    def __repr__(self):
-        return f"lin_{self.initial!r}"
+    return LinearSchedule(initial, 0.0, 1.0)
 
 
 def validate(env_id, algo, base):
