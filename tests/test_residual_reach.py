@@ -7,7 +7,6 @@ import math
 import numpy as np
 
 from continuum_gym.baselines.scenarios import coverage_grid
-from continuum_gym.envs.view_kernel import view_observe_batch
 from continuum_gym.envs.view_tracking import ACTION_SCALE, ViewTrackingCore
 from continuum_gym.evaluation.optimum import view_tracking_optimum
 from continuum_gym.evaluation.residual_reach import hold_effort, holdable_optimum
@@ -21,12 +20,6 @@ def _core(q_davinci, scale):
     core = ViewTrackingCore(num_envs=len(ids), task="coverage", task_split="test", residual_scale=scale)
     core.reset_rows(np.arange(len(ids)), ids)
     return core
-
-
-def _observe(core):
-    view_observe_batch(np.arange(core.num_envs), core.q, core.steps, core.tasks.centre, core.tasks.amp,
-                       core.tasks.omega, core.tasks.phase, core.tasks.duration, core.control_dt, core.robot._geom,
-                       core.controller.params, True, *core._geometry_args(), core.base_cmd, core.obs, core.metrics)
 
 
 def _hold(core, q_goal, seconds=10.0, gain=10.0):
@@ -50,7 +43,7 @@ def test_hold_effort_is_the_action_that_cancels_the_envs_baseline_command():
     q_davinci = GRID[[3, 200, 400]]
     core = _core(q_davinci, 2.0)
     core.q[:] = np.random.default_rng(1).uniform([0, -1, 0, -3, 0, -3], [0.1, 1, 0.7, 3, 1.5, 3], (3, 6))
-    _observe(core)
+    core.observe_rows(np.arange(core.num_envs))
     expected = np.max(np.abs(core.base_cmd) / (2.0 * ACTION_SCALE), axis=1)
     np.testing.assert_allclose(hold_effort(core.q, q_davinci, 2.0), expected, rtol=1e-12)
 

@@ -124,8 +124,12 @@ class ViewTrackingCore(BatchedCore):
         rows = np.asarray(rows, dtype=np.int64)
         fresh = view_tasks(self.task, self.task_split, task_ids, self.control_dt, self.grid)
         self._install_tasks(rows, fresh)
-        view_observe_batch(rows, self.q, self.steps, self.tasks.centre, self.tasks.amp, self.tasks.omega,
-                           self.tasks.phase, self.tasks.duration, self.control_dt, self.robot._geom,
+        self.observe_rows(rows)
+
+    def observe_rows(self, rows):
+        """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
+        view_observe_batch(np.asarray(rows, dtype=np.int64), self.q, self.steps, self.tasks.centre, self.tasks.amp,
+                           self.tasks.omega, self.tasks.phase, self.tasks.duration, self.control_dt, self.robot._geom,
                            self.controller.params, self.base_controller is not None, *self._geometry_args(),
                            self.base_cmd, self.obs, self.metrics)
 

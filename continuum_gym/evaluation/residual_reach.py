@@ -10,6 +10,7 @@ best-OR configuration it can hold, which is the coverage a perfect residual poli
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import minimize
 
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD, coverage_grid
@@ -36,19 +37,29 @@ def hold_effort(q, q_davinci, residual_scale, controller=None, control_dt=CONTRO
         controller: the base controller (default dimension-reduced IK).
         control_dt: control step (s).
     """
-    from continuum_gym.envs.view_tracking import ACTION_SCALE
-
     residual_scale = positive(residual_scale, "residual_scale", "fraction of the action scale")
     controller = make_controller("dimension_reduced") if controller is None else controller
     q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
     p_t, R_t = DaVinciEndoscope().target_pose(np.atleast_2d(q_davinci))
-    scratch, rates = make_view_scratch(), np.empty(6)
-    reach = residual_scale * ACTION_SCALE
-    out = np.empty(len(q))
-    for k in range(len(q)):
-        view_rates_kernel(q[k], p_t[k], R_t[k], control_dt, controller.robot._geom, controller.params, scratch, rates)
-        out[k] = np.max(np.abs(rates) / reach)
-    return out
+    effort = _EffortKernel(controller, residual_scale, control_dt)
+    return np.array([effort(q[k], p_t[k], R_t[k]) for k in range(len(q))])
+
+
+class _EffortKernel:
+    """The hold effort of one configuration towards one target pose, with its work arrays allocated once."""
+
+    def __init__(self, controller, residual_scale, control_dt=CONTROL_DT):
+        from continuum_gym.envs.view_tracking import ACTION_SCALE
+
+        self.geom, self.params = controller.robot._geom, controller.params
+        self.reach = residual_scale * ACTION_SCALE
+        self.control_dt = control_dt
+        self.scratch, self.rates = make_view_scratch(), np.empty(6)
+
+    def __call__(self, q, p_target, R_target):
+        view_rates_kernel(np.ascontiguousarray(q, dtype=float), p_target, R_target, self.control_dt, self.geom,
+                          self.params, self.scratch, self.rates)
+        return float(np.max(np.abs(self.rates) / self.reach))
 
 
 def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restarts=3, seed=0):
@@ -59,8 +70,9 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
     """
     controller = make_controller("dimension_reduced") if controller is None else controller
     q_davinci = np.atleast_2d(q_davinci)
-    frustum = Frustum()
-    p_a, R_a = DaVinciEndoscope().forward_kinematics(q_davinci)
+    frustum, davinci = Frustum(), DaVinciEndoscope()
+    p_a, R_a = davinci.forward_kinematics(q_davinci)
+    p_t, R_t = davinci.target_pose(q_davinci)
     geom = controller.robot._geom
     lower, upper = controller.robot.joint_limits
     rng = np.random.default_rng(seed)
@@ -70,12 +82,12 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
         return _or_one(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], geom, frustum.tan_half, frustum.near,
                        frustum.far)
 
+    effort_kernel = _EffortKernel(controller, positive(residual_scale, "residual_scale", "fraction of the action scale"))
+
     def effort(q, k):
-        return hold_effort(q, q_davinci[k:k + 1], residual_scale, controller)[0]
+        return effort_kernel(q, p_t[k], R_t[k])
 
-    from scipy.optimize import minimize
-
-    efforts = hold_effort(q_out, q_davinci, residual_scale, controller)
+    efforts = np.array([effort(q_out[k], k) for k in range(len(q_out))])
     for k in np.flatnonzero(efforts > 1.0):
         def objective(q, k=k):
             q = np.clip(q, lower, upper)
