@@ -1,6 +1,6 @@
 """Plain-numpy forward kinematics + Jacobian of the continuum endoscope (benchmark reference).
 
-One configuration at a time, written literally after paper 001 with ERRATA §2.2 / §2.3:
+One configuration at a time, written literally after paper 001 with paper-notes §2.2 / §2.3:
 eqs (3), (4) corrected, (5), (6), (7), (8) and (9) with T0, T1, T2 built from 3x3 numpy products.
 It is deliberately straightforward (no numba, no batching) and serves as the speed baseline for
 ``continuum_gym.robots.endoscope`` and as an independent cross-check in the tests. Lengths in m.
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-_SERIES = 2e-3  # ERRATA §2.2: series below |theta| < 2e-3
+_SERIES = 2e-3  # paper-notes §2.2: series below |theta| < 2e-3
 
 
 def _rz(a):
@@ -43,7 +43,7 @@ def _segment(theta, delta, length):
         da = (c - 1) / theta**2 + s / theta
         db = -s / theta**2 + c / theta
     p = length * np.array([cd * a, -sd * a, b])
-    A = _rz(-delta) @ _rz(-np.pi / 2) @ _ry(-np.pi / 2)  # ERRATA §2.3 item 2
+    A = _rz(-delta) @ _rz(-np.pi / 2) @ _ry(-np.pi / 2)  # paper-notes §2.3 item 2
     R = A @ _rz(theta) @ A.T
     Jv = length * np.array([[cd * da, -sd * a], [-sd * da, -cd * a], [db, 0.0]])
     Jw = np.array([[sd, cd * s], [cd, -sd * s], [0.0, c - 1]])
@@ -54,7 +54,7 @@ def endoscope_fk_jacobian_numpy(q, robot):
     """``(p_cam, w_R_ct, p_ct, J)`` of one configuration q (6,) of ``robot`` (a ContinuumEndoscope).
 
     Same outputs and units as ``ContinuumEndoscope.fk_jacobian``: positions in m, J (6, 6) the twist
-    [v; w] of the target point ct in {w} per joint rate (eq 9 with ERRATA §2.2 / §2.3 item 3).
+    [v; w] of the target point ct in {w} per joint rate (eq 9 with paper-notes §2.2 / §2.3 item 3).
     """
     L0, phi, th1, de1, th2, de2 = np.asarray(q, dtype=np.float64)
     L1, Lm, L2, Lc, Le = robot.L1, robot.Lm, robot.L2, robot.Lc, robot.Le

@@ -59,7 +59,7 @@ def _frames(q, lengths):
 
 
 def fk_jacobian_numpy(q, lengths):
-    """Tip (p, R) and 6x7 Jacobian of one configuration, eqs (2)-(8) with ERRATA §1.2."""
+    """Tip (p, R) and 6x7 Jacobian of one configuration, eqs (2)-(8) with paper-notes §1.2."""
     Rs, gs = _frames(q, lengths)
     J = np.zeros((6, 7))
     for j in range(3):

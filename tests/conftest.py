@@ -9,17 +9,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-REFERENCE_CANDIDATES = [
-    Path(__file__).resolve().parents[1] / "tests" / "data" / "reference_values.json",
-    Path(__file__).resolve().parents[2] / "shared" / "reference" / "reference_values.json",
-]
+#: Values of an independent implementation of both papers (a copy kept in the repository).
+REFERENCE_PATH = Path(__file__).resolve().parent / "data" / "reference_values.json"
 
 
 def load_reference() -> dict:
-    for path in REFERENCE_CANDIDATES:
-        if path.exists():
-            return json.loads(path.read_text())
-    raise FileNotFoundError("reference_values.json not found in " + ", ".join(map(str, REFERENCE_CANDIDATES)))
+    """The reference values; a missing file is an error (never a skipped test)."""
+    if not REFERENCE_PATH.exists():
+        raise FileNotFoundError(f"reference values missing: {REFERENCE_PATH} (part of the repository)")
+    return json.loads(REFERENCE_PATH.read_text())
 
 
 @pytest.fixture(scope="session")

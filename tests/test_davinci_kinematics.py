@@ -1,18 +1,15 @@
-"""Rigid 30° da Vinci endoscope of paper 001 (ERRATA §2.2, §2.3 item 1)."""
+"""Rigid 30° da Vinci endoscope of paper 001 (paper-notes §2.2, §2.3 item 1)."""
 
 from __future__ import annotations
-
-import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from continuum_gym.robots.davinci import ALPHA_CONVENTIONS, DaVinciEndoscope
+from tests.conftest import load_reference
 
-REFERENCE = Path("/work/shared/reference/reference_values.json")
-DAVINCI_REF = json.loads(REFERENCE.read_text())["davinci"] if REFERENCE.exists() else []
+DAVINCI_REF = load_reference()["davinci"]
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +34,6 @@ def _stem(q):
     return Rotation.from_euler("YXZ", q[..., 1:].reshape(-1, 3)).as_matrix().reshape(q.shape[:-1] + (3, 3))
 
 
-@pytest.mark.skipif(not DAVINCI_REF, reason="reference_values.json not available")
 @pytest.mark.parametrize("index", range(len(DAVINCI_REF)))
 def test_reference_values(robot, index):
     entry = DAVINCI_REF[index]
@@ -52,7 +48,7 @@ def test_reference_values(robot, index):
 
 @pytest.mark.parametrize("convention", ALPHA_CONVENTIONS)
 def test_optical_axis_points_at_target(convention):
-    """ERRATA §2.3 item 1: R_dVt e3 == (p_dVt - cam) / Le (the printed eq 1 is off by ~1)."""
+    """paper-notes §2.3 item 1: R_dVt e3 == (p_dVt - cam) / Le (the printed eq 1 is off by ~1)."""
     robot = DaVinciEndoscope(alpha_convention=convention)
     Q = _random_configurations(np.random.default_rng(1), 500, wide=True)
     p, R = robot.forward_kinematics(Q)

@@ -1,9 +1,8 @@
-"""Continuum endoscope of paper 001 (ERRATA §2): reference values, finite differences, closed forms."""
+"""Continuum endoscope of paper 001 (paper-notes §2): reference values, finite differences, closed forms."""
 
 from __future__ import annotations
 
 import importlib.util
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,18 +15,10 @@ from continuum_gym.robots.endoscope import (
     endoscope_segment_jacobian,
     endoscope_segment_pose,
 )
+from tests.conftest import load_reference
 
-REFERENCE = Path("/work/shared/reference/reference_values.json")
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _reference_entries(key):
-    if not REFERENCE.exists():
-        return []
-    return json.loads(REFERENCE.read_text())[key]
-
-
-ENDOSCOPE_REF = _reference_entries("endoscope")
+ENDOSCOPE_REF = load_reference()["endoscope"]
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +61,6 @@ def _column_errors(J, J_fd):
 # ---------------------------------------------------------------------------------------------
 # reference values of the independent implementation
 # ---------------------------------------------------------------------------------------------
-@pytest.mark.skipif(not ENDOSCOPE_REF, reason="reference_values.json not available")
 @pytest.mark.parametrize("index", range(len(ENDOSCOPE_REF)))
 def test_reference_values(robot, index):
     entry = ENDOSCOPE_REF[index]
@@ -117,7 +107,7 @@ def test_jacobian_at_joint_limits(robot):
 
 
 def test_series_branch_is_continuous(robot):
-    """Closed form and series of ERRATA §2.2 meet at the threshold."""
+    """Closed form and series of paper-notes §2.2 meet at the threshold."""
     eps = 1e-12
     q = robot.home
     below, above = q.copy(), q.copy()
@@ -143,7 +133,7 @@ def test_matches_plain_numpy_reference(robot):
 
 
 def test_segment_jacobian_matches_finite_differences():
-    """Eqs (5), (6) as printed against central differences of eqs (3), (4) (ERRATA §2.8)."""
+    """Eqs (5), (6) as printed against central differences of eqs (3), (4) (paper-notes §2.8)."""
     rng = np.random.default_rng(11)
     theta = np.concatenate([rng.uniform(-2.5, 2.5, 50), [0.0, 1e-4, 1e-3, 2.5e-3]])
     delta = rng.uniform(-np.pi, np.pi, theta.shape)

@@ -70,7 +70,7 @@ def test_tip_jacobian_matches_finite_differences_near_straight():
 
 
 def test_printed_eq4_would_fail_the_finite_difference_check():
-    """The check separates the corrected S_j from the printed one (ERRATA §1.3 item 1)."""
+    """The check separates the corrected S_j from the printed one (paper-notes §1.3 item 1)."""
     q = ROBOT.psi_a
     J = ROBOT.jacobian(q)
     J_fd = fd_twist_jacobian(ROBOT.forward_kinematics, q)
@@ -115,7 +115,7 @@ def test_straight_robot_closed_form():
         p, R = ROBOT.forward_kinematics(q)
         np.testing.assert_allclose(p, [0, 0, 0.065 + q_ins], atol=1e-15)
         np.testing.assert_allclose(R, np.eye(3), atol=1e-15)
-    # ERRATA §1.4: rank 4 when straight (bending planes distinct; with equal deltas the bends are coplanar).
+    # paper-notes §1.4: rank 4 when straight (bending planes distinct; with equal deltas the bends are coplanar).
     straight = np.array([HALF_PI, 0.0, HALF_PI, 0.7, HALF_PI, -2.5, 0.0])
     assert np.linalg.matrix_rank(ROBOT.jacobian(straight), tol=1e-9) == 4
     assert np.linalg.matrix_rank(ROBOT.jacobian(ROBOT.straight), tol=1e-9) == 3
@@ -147,7 +147,7 @@ def test_quarter_circle_bend():
 
 
 def test_psi_a_matches_errata_description():
-    """ERRATA §1.5: psi_a bends 0.589, 0.136, 0.469 rad; tip at (-14.5, 28.7, 63.3) mm."""
+    """paper-notes §1.5: psi_a bends 0.589, 0.136, 0.469 rad; tip at (-14.5, 28.7, 63.3) mm."""
     np.testing.assert_allclose(ROBOT.bend_angles(ROBOT.psi_a), [0.589, 0.136, 0.469], atol=1e-3)
     p, _ = ROBOT.forward_kinematics(ROBOT.psi_a)
     np.testing.assert_allclose(p * 1e3, [-14.5, 28.7, 63.3], atol=0.05)

@@ -31,7 +31,7 @@ def test_projected_gradient_step_matches_reference(reference, index):
 
 
 def test_null_space_term_leaks_exactly_the_damping_term():
-    """With xi = 0, J q_dot = -eta1 eps (J J^T + eps I)^-1 J grad Pi (ERRATA §1.3 item 12)."""
+    """With xi = 0, J q_dot = -eta1 eps (J J^T + eps I)^-1 J grad Pi (paper-notes §1.3 item 12)."""
     rng = np.random.default_rng(0)
     controller = ProjectedGradient()
     for _ in range(10):
@@ -47,7 +47,7 @@ def test_null_space_term_leaks_exactly_the_damping_term():
 
 
 def test_hold_task_reproduces_the_paper():
-    """Task (a): VOI 0.25 -> 0.16 (ERRATA band 0.14-0.18 at 800 and 1500 it), drift <= 0.3 mm."""
+    """Task (a): VOI 0.25 -> 0.16 (paper-notes §3 band 0.14-0.18 at 800 and 1500 it), drift <= 0.3 mm."""
     p, R = hold_targets(ROBOT.psi_a, 1500)
     q, gamma = ProjectedGradient(rotate_endoscope=False).rollout(ROBOT.psi_a, 0.0, p, R)
     voi = visual_occlusion_index(ROBOT, q, gamma)

@@ -48,7 +48,7 @@ def test_reference_values(reference, index):
 
 
 def test_psi_a_voi_matches_errata_numbers():
-    """ERRATA §1.3 item 13: VOI 0.2502, nu 0.4909 rad, r_e 23.73 mm, r_max 69.35 mm."""
+    """paper-notes §1.3 item 13: VOI 0.2502, nu 0.4909 rad, r_e 23.73 mm, r_max 69.35 mm."""
     details = occlusion_details(ROBOT, ROBOT.psi_a, 0.0)
     assert details["voi"] == pytest.approx(0.2502, abs=1e-4)
     assert details["nu"] == pytest.approx(0.4909, abs=1e-4)
@@ -90,7 +90,7 @@ def test_lens_models_coincide_at_zero_and_differ_elsewhere():
 
 @pytest.mark.parametrize("cone", [CONE, PHYSICAL])
 def test_force_direction_is_gradient_of_distance(cone):
-    """f_hat = grad d (eq 19 = outward normal, ERRATA §1.3 item 8), checked by FD of eq (16)."""
+    """f_hat = grad d (eq 19 = outward normal, paper-notes §1.3 item 8), checked by FD of eq (16)."""
     rng = np.random.default_rng(1)
     checked = 0
     while checked < 50:
@@ -246,7 +246,7 @@ def test_voi_broadcasts_and_batches_exactly():
 
 
 def test_gamma_changes_voi_strongly():
-    """ERRATA §5: rotating the angled endoscope alone takes psi_a from VOI 0.25 to near 0."""
+    """paper-notes §5: rotating the angled endoscope alone takes psi_a from VOI 0.25 to near 0."""
     gammas = np.linspace(-math.pi, math.pi, 181)
     vois = visual_occlusion_index(ROBOT, ROBOT.psi_a, gammas)
     assert vois.min() < 0.05 and vois.max() >= 0.25

@@ -1,9 +1,8 @@
-"""Frustum geometry and the overlap ratio OR = vol(F_a ∩ F_b) / vol(F_a) (ERRATA §2.4, §2.8)."""
+"""Frustum geometry and the overlap ratio OR = vol(F_a ∩ F_b) / vol(F_a) (paper-notes §2.4, §2.8)."""
 
 from __future__ import annotations
 
 import importlib.util
-import json
 from pathlib import Path
 
 import numpy as np
@@ -20,10 +19,11 @@ from continuum_gym.geometry.overlap import (
     overlap_ratio_nb,
     overlap_ratio_reference,
 )
+from tests.conftest import load_reference
 
-REFERENCE = json.loads(Path("/work/shared/reference/reference_values.json").read_text())
+REFERENCE = load_reference()
 OVERLAP_CASES = REFERENCE["overlap"]
-TOL = 1e-9  # ERRATA / reference README: overlap ratio to ~1e-9
+TOL = 1e-9  # exact divergence-theorem volume vs the reference implementation
 
 
 def _case(entry):
@@ -208,7 +208,7 @@ def test_non_default_frustum_matches_scipy_reference():
 
 @pytest.mark.parametrize("index", [0, 1, 3])
 def test_monte_carlo_agrees(index):
-    """ERRATA §2.4: 4e5 samples agree with the exact value within 2e-3 (seeded, so deterministic)."""
+    """paper-notes §2.4: 4e5 samples agree with the exact value within 2e-3 (seeded, so deterministic)."""
     pose = _case(OVERLAP_CASES[index])
     estimate = overlap_ratio_monte_carlo(*pose, n_samples=400_000, rng=np.random.default_rng(0))
     assert estimate == pytest.approx(OVERLAP_CASES[index]["overlap_ratio"], abs=2e-3)

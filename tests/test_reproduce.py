@@ -1,4 +1,4 @@
-"""The quick reproduction lands inside wide bands of ERRATA §3 and writes what it promises."""
+"""The quick reproduction lands inside wide bands of paper-notes §3 and writes what it promises."""
 
 from __future__ import annotations
 

@@ -33,7 +33,7 @@ def test_dimension_reduced_reaches_reachable_targets():
     start = np.broadcast_to(CASE_STUDY_START, (20, 6))
     result = DimensionReduced().solve(start, target)
     _, info = DimensionReduced().joint_rates_with_info(result["q"], target)
-    # Position has priority: it converges (ERRATA §2.6: 1e-3 mm) wherever the run did not stall on a limit.
+    # Position has priority: it converges (paper-notes §2.6: 1e-3 mm) wherever the run did not stall on a limit.
     assert np.median(info["position_error_m"]) < 1e-6
     assert np.mean(info["position_error_m"] < 1e-5) >= 0.8
 

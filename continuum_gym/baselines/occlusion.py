@@ -1,12 +1,12 @@
 """Occlusion-avoidance baselines of Sarli & Simaan (paper 000): minimum-norm and projected gradient.
 
-Both track a desired tip pose with the saturated proportional law of ERRATA §1.3 item 11 and
-rotate the endoscope with eq (24) (gamma_dot = -eta2 dd_c/dgamma, ERRATA §1.3 item 10).
+Both track a desired tip pose with the saturated proportional law of paper-notes §1.3 item 11 and
+rotate the endoscope with eq (24) (gamma_dot = -eta2 dd_c/dgamma, paper-notes §1.3 item 10).
 
 - ``MinimumNorm``: q_dot = J^+ xi_dot with the damped inverse of eq (23) (first term of eq 22).
 - ``ProjectedGradient``: eq (22), q_dot = J^+ xi_dot - eta1 (I - J^+ J) grad Pi, with grad Pi of eq (12).
 
-The damped projector leaks into the task (ERRATA §1.3 item 12); that is the paper's epsilon
+The damped projector leaks into the task (paper-notes §1.3 item 12); that is the paper's epsilon
 trade-off and is kept.
 
 Limits (the paper has none; ``OcclusionLimits``): a two-sided bend limit |pi/2 - theta_j| <= max_bend,
@@ -107,7 +107,7 @@ UNLIMITED = None
 # ---------------------------------------------------------------------- compiled kernels
 @njit(cache=True)
 def tracking_twist(p, R, p_des, R_des, v_ff, k_track, v_max, w_max, work33, e_w, xi):
-    """Desired twist xi (6,) of ERRATA §1.3 item 11: saturated proportional + linear feed-forward."""
+    """Desired twist xi (6,) of paper-notes §1.3 item 11: saturated proportional + linear feed-forward."""
     e0 = p_des[0] - p[0]
     e1 = p_des[1] - p[1]
     e2 = p_des[2] - p[2]
@@ -152,7 +152,7 @@ def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, lengths, stiffness,
                            prm, ws, scratch, qdot):
     """One control evaluation: q_dot (7,) into ``qdot``; returns (gamma_dot, frozen_mask_bits, rate_scale).
 
-    ``scratch`` holds work arrays (see ``make_scratch``). The tip law of ERRATA §1.3 item 11, then
+    ``scratch`` holds work arrays (see ``make_scratch``). The tip law of paper-notes §1.3 item 11, then
     ``resolve_rates``.
     """
     p, R, J, work33, e_w, xi = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4], scratch[5]
@@ -274,7 +274,7 @@ def _rates_batch(Q, G, P_des, R_des, V_ff, dt, lengths, stiffness, segments, fra
 @njit(cache=True)
 def _rollout_batch(Q0, G0, P_des, R_des, V_ff, dt, lengths, stiffness, segments, fractions, prm,
                    q_traj, gamma_traj):
-    """Explicit Euler (ERRATA §1.3 item 6) over T steps with per-step targets (N, T, ...)."""
+    """Explicit Euler (paper-notes §1.3 item 6) over T steps with per-step targets (N, T, ...)."""
     ws = make_workspace()
     scratch = make_scratch(segments.shape[0])
     qdot = np.empty(DOF)
@@ -302,11 +302,11 @@ class OcclusionController(Controller):
         robot: ``MultiBackboneRobot`` (default geometry of Table I).
         cone: ``LensCone`` (None: Table I, literal lens).
         field: ``ForceField`` (None: Table I with p = 1, q = 2).
-        psps: points subject to potential, (segment, arc fraction) pairs (ERRATA §1.5).
+        psps: points subject to potential, (segment, arc fraction) pairs (paper-notes §1.5).
         eta1: null-space gradient gain (Table I: 30).
         eta2: endoscope rotation gain (Table I: 30).
         epsilon: damping of eq (23) (Table I: 1e-6, SI).
-        k_track: proportional gain of the tip law (1/s), ERRATA §1.3 item 11: 100.
+        k_track: proportional gain of the tip law (1/s), paper-notes §1.3 item 11: 100.
         v_max: tip speed cap (m/s): 0.05.
         w_max: tip angular-speed cap (rad/s): 1.
         rotate_endoscope: apply eq (24) to gamma (task (a) of the paper holds gamma fixed).
@@ -413,7 +413,7 @@ class OcclusionController(Controller):
         return np.concatenate([qdot, gamma_dot[:, None]], axis=1).reshape(shape + (DOF + 1,))
 
     def rollout(self, q0, gamma0, p_des, R_des, v_des=None, dt=1e-3):
-        """Closed-loop explicit-Euler run (ERRATA §1.3 item 6) from q0 over per-step targets.
+        """Closed-loop explicit-Euler run (paper-notes §1.3 item 6) from q0 over per-step targets.
 
         Args:
             q0: (N, 7) or (7,) start configurations.

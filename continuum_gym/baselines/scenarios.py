@@ -1,7 +1,7 @@
 """The papers' experiments as named, fixed scenarios (SI), shared by ``reproduce`` and the environments.
 
-Paper 000 (ERRATA §1.5): task (a) holds the tip pose of psi_a at gamma = 0 for 1500 iterations at
-1 ms; task (b) tracks a 10 mm circle centred on the view axis. Paper 001 (ERRATA §2.1, §2.6): two
+Paper 000 (paper-notes §1.5): task (a) holds the tip pose of psi_a at gamma = 0 for 1500 iterations at
+1 ms; task (b) tracks a 10 mm circle centred on the view axis. Paper 001 (paper-notes §2.1, §2.6): two
 case-study targets from Psi0, and the coverage grid (L_dV = 65 mm, roll 0, yaw/pitch over [-pi/3, pi/3]).
 """
 
@@ -22,7 +22,7 @@ PAPER_DT = 1e-3
 
 @dataclass(frozen=True)
 class CircleTask:
-    """Task (b) of paper 000 with the ERRATA §1.5 assumptions.
+    """Task (b) of paper 000 with the paper-notes §1.5 assumptions.
 
     Args:
         radius: circle radius (m), 10 mm (paper).
@@ -53,14 +53,14 @@ class CircleTask:
 
     @staticmethod
     def start_configuration() -> np.ndarray:
-        """psi_b of ERRATA §1.5 (bounded IK, most relaxed exact solution); the orientation to hold."""
+        """psi_b of paper-notes §1.5 (bounded IK, most relaxed exact solution); the orientation to hold."""
         return MultiBackboneRobot.psi_b.copy()
 
 
 def sample_hold_starts(robot: MultiBackboneRobot, n: int, rng: np.random.Generator, voi_target=0.25,
                        voi_tolerance=0.01, min_psps_inside=0.6, max_bend=1.2, max_insertion=0.02,
                        batch=4096, max_draws=2_000_000):
-    """Paper-like hold starts (ERRATA §1.5 search): random bends, VOI in target ± tolerance at gamma = 0.
+    """Paper-like hold starts (paper-notes §1.5 search): random bends, VOI in target ± tolerance at gamma = 0.
 
     Draws theta_i = pi/2 - U(0.05, max_bend), delta_i ~ U(-pi, pi), q_ins ~ U(0, max_insertion) (m),
     and accepts a draw whose VOI is within tolerance, whose tip is inside the cone and with at least
@@ -103,9 +103,9 @@ def _inside_cone_fraction(robot, q):
 
 
 # ---------------------------------------------------------------------- paper 001
-#: Case-study start configuration Psi0 (ERRATA §2.1), SI: [L0 (m), phi, theta1, delta1, theta2, delta2].
+#: Case-study start configuration Psi0 (paper-notes §2.1), SI: [L0 (m), phi, theta1, delta1, theta2, delta2].
 CASE_STUDY_START = np.array([0.008, 0.0, 0.3857, -1.57, 0.7828, 1.57])
-#: da Vinci targets of the two case studies, [L_dV (m), yaw, pitch, roll] (ERRATA §2.1).
+#: da Vinci targets of the two case studies, [L_dV (m), yaw, pitch, roll] (paper-notes §2.1).
 CASE_STUDIES = {
     "case1": np.array([0.06088, 0.5, -0.4, 0.0]),
     "case2": np.array([0.0625, -0.9, 0.7, 0.0]),

@@ -1,16 +1,16 @@
 """View-tracking baselines of Deng, Xu et al. (paper 001): resolved-rate and dimension-reduced IK.
 
 The continuum endoscope's visual target point ct must reach the da Vinci target frame (p_dVt, R_dVt).
-Each step computes the errors of eq (10) and the capped twist of ERRATA §2.3 item 5
+Each step computes the errors of eq (10) and the capped twist of paper-notes §2.3 item 5
 (v = e_p_hat min(v_lim, eps_p/dt), w = r_hat min(w_lim, eps_R/dt)), then
 
 - ``ResolvedRate`` (eqs 10-13): q_dot = pinv(J) [v; w] with the undamped Moore-Penrose inverse
-  (ERRATA §2.3 item 6); the step is clamped to the joint limits.
-- ``DimensionReduced`` (eqs 14-19, ERRATA §2.5): prioritised position-then-orientation solution with
+  (paper-notes §2.3 item 6); the step is clamped to the joint limits.
+- ``DimensionReduced`` (eqs 14-19, paper-notes §2.5): prioritised position-then-orientation solution with
   damped inverses (lambda = 0.01 for every inverse); any active variable whose update would leave its
   range is frozen at its last value, its column removed, and the step recomputed.
 
-Units (ERRATA §2.7): the paper's inverses are minimum-norm in its own units, mm and rad, and
+Units (paper-notes §2.7): the paper's inverses are minimum-norm in its own units, mm and rad, and
 lambda = 0.01 is a mm value. The arithmetic here runs in mm and rad (rows of v and the L0 column
 scaled), which is exactly the SI formulation with lambda_v = 1e-8 m² and lambda_w = 0.01; the public
 interface is SI. delta is wrapped to [-pi, pi); phi is a hard limit.
@@ -32,9 +32,9 @@ from continuum_gym.robots.validation import positive
 DOF = 6
 RMRC = 0
 DR = 1
-# Internal length unit of the paper-001 IK: mm (ERRATA §2.7).
+# Internal length unit of the paper-001 IK: mm (paper-notes §2.7).
 MM_PER_M = 1000.0
-# ERRATA §2.6 stopping rules, in the paper's units (mm, rad).
+# paper-notes §2.6 stopping rules, in the paper's units (mm, rad).
 CONVERGED_POSITION_MM = 1e-3
 CONVERGED_ORIENTATION = 1e-5
 STALL_MOTION = 1e-9
@@ -45,7 +45,7 @@ ViewParams = namedtuple("ViewParams", ["method", "v_lim", "w_lim", "damping", "l
 
 @njit(cache=True)
 def wrap_half_open(x):
-    """Wrap an angle (rad) to [-pi, pi) (ERRATA §2.1: deltas are wrapped, not limited)."""
+    """Wrap an angle (rad) to [-pi, pi) (paper-notes §2.1: deltas are wrapped, not limited)."""
     return x - 2.0 * math.pi * math.floor((x + math.pi) / (2.0 * math.pi))
 
 
@@ -96,11 +96,11 @@ def _damped_pinv_rows(A, damping, out, work3):
 def view_rates_kernel(q, p_tgt, R_tgt, dt, geom, prm, scratch, qdot):
     """Joint rates (SI) for one step into ``qdot``; returns (eps_p, eps_R, frozen_bits).
 
-    RMRC: undamped pinv of the full 6x6 J. DR: ERRATA §2.5 loop with freezing. Both in mm/rad.
+    RMRC: undamped pinv of the full 6x6 J. DR: paper-notes §2.5 loop with freezing. Both in mm/rad.
     """
     p_cam, R_ct, p_ct, J, R1, W1, R2, work33, e_w, twist, Jmm, mask, A3, B3, M6, C, q_new = scratch
     eps_p, eps_r = view_errors(q, p_tgt, R_tgt, geom, scratch)
-    # Capped twist (ERRATA §2.3 item 5) from SI errors and limits, then expressed in mm/s and rad/s.
+    # Capped twist (paper-notes §2.3 item 5) from SI errors and limits, then expressed in mm/s and rad/s.
     v_gain = min(prm.v_lim, eps_p / dt) / eps_p if eps_p > 0.0 else 0.0
     w_gain = min(prm.w_lim, eps_r / dt) / eps_r if eps_r > 0.0 else 0.0
     for a in range(3):
@@ -207,7 +207,7 @@ def integrate_view_step(q, qdot, dt, lower, upper, out):
 
 @njit(cache=True)
 def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, geom, prm, record, q_final, steps, status, q_hist):
-    """Run each row to convergence, stall or max_steps (ERRATA §2.6). status: 0 max steps, 1 converged, 2 stalled."""
+    """Run each row to convergence, stall or max_steps (paper-notes §2.6). status: 0 max steps, 1 converged, 2 stalled."""
     scratch = make_view_scratch()
     q_new = scratch[16]
     qdot = np.empty(6)
@@ -310,7 +310,7 @@ class ViewTrackingController(Controller):
         return rates.reshape(shape + (DOF,)), info
 
     def solve(self, q0, target, dt=0.01, max_steps=1000, record=False):
-        """Iterate to convergence, stall or ``max_steps`` (ERRATA §2.6), each row independently.
+        """Iterate to convergence, stall or ``max_steps`` (paper-notes §2.6), each row independently.
 
         Returns a dict: ``q`` (..., 6) final configurations, ``steps`` (...), ``status`` (...: 0 ran out
         of steps, 1 converged, 2 stalled) and, with ``record``, ``history`` (..., max_steps + 1, 6)

@@ -216,7 +216,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     A 3-segment multi-backbone continuum robot with insertion (7 DoF) leaves its channel 4.47 mm beside
     a 30-degree angled-lens endoscope. Its tip must follow a desired pose while its body stays out of
     the endoscope's view cone (half-angle 27.5 deg) and the tip stays well inside the view. The
-    endoscope rotation gamma is part of the control. Physics: paper 000 with ERRATA §1 (SI units).
+    endoscope rotation gamma is part of the control. Physics: paper 000 with paper-notes §1 (SI units).
 
     The action is a *residual* added to an analytic baseline (``base_controller``, default the
     projected gradient with the centring law for gamma), recomputed at every 1 ms substep; with
@@ -257,7 +257,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     | 15-17 | tip orientation error log(R_des R^T) | / 0.1 rad |
     | 18-20 | desired tip velocity (feed-forward) | / 0.05 m/s |
     | 21 | tip angle from the view axis | / cone half-angle |
-    | 22 | VOI (eq 27, ERRATA §1.3 item 13) | - |
+    | 22 | VOI (eq 27, paper-notes §1.3 item 13) | - |
     | 23-30 | baseline command at this state (the next substep's) | / rate limits |
     | 31 | elapsed time | / task duration |
 
@@ -270,8 +270,8 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
 
     ## Starting State
     ``hold`` and ``random``: paper-like configurations (VOI 0.2-0.3 at gamma = 0, tip within 0.7 of the
-    half-angle, >= 60 % of the psps in the cone; ERRATA §1.5's search) from a per-split pool; gamma 0.
-    ``circle``: psi_b of ERRATA §1.5, gamma 0.
+    half-angle, >= 60 % of the psps in the cone; paper-notes §1.5's search) from a per-split pool; gamma 0.
+    ``circle``: psi_b of paper-notes §1.5, gamma 0.
 
     ## Episode End
     ``terminated`` when the tip is more than 10 mm from its desired position (the tip is lost);
@@ -288,7 +288,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     - Limits the paper lacks (assumptions): ``max_bend`` (pi/2, two-sided |pi/2 - theta_j| <= max_bend),
       ``insertion`` ((0, 0.04) m), ``bend_rate`` (3 rad/s), ``plane_rate`` (6 rad/s), ``insertion_rate``
       (0.02 m/s), ``gamma_rate`` (3 rad/s); gamma is wrapped to (-pi, pi].
-    - ``lens_model``: ``"literal"`` (default) or ``"physical"`` (ERRATA §1.3 item 7).
+    - ``lens_model``: ``"literal"`` (default) or ``"physical"`` (paper-notes §1.3 item 7).
     - ``render_mode``: ``None`` or ``"rgb_array"``; ``camera``: ``"external"`` or ``"endoscope"``;
       ``pixel_occlusion``: add the pixel-occlusion fraction to ``info`` (slow).
 

@@ -31,7 +31,7 @@ N_TERMS = 3
 TASK_SPLITS = ("train", "test")
 SPLIT_CODE = {"train": 0, "test": 1}
 HOLD_POOL_SIZE = {"train": 512, "test": 128}
-#: Hold starts: VOI at gamma = 0 in this window (paper-like, ERRATA §1.5 widened as the issue asks).
+#: Hold starts: VOI at gamma = 0 in this window (paper-like, paper-notes §1.5 widened as the issue asks).
 HOLD_VOI_WINDOW = (0.2, 0.3)
 #: Visibility requirement: tip angle from the view axis <= this fraction of the cone half-angle.
 VISIBILITY_FRACTION = 0.7
@@ -78,7 +78,7 @@ OCCLUSION_DURATION_S = {"hold": 1.5, "circle": 10.0, "random": 5.0}
 def hold_start_pool(split: str, max_bend: float, insertion: tuple) -> np.ndarray:
     """Paper-like start configurations (pool, 7) for one split, within the env's limits.
 
-    ERRATA §1.5's search widened to VOI in [0.2, 0.3] at gamma = 0, bends drawn up to min(1.2 rad,
+    paper-notes §1.5's search widened to VOI in [0.2, 0.3] at gamma = 0, bends drawn up to min(1.2 rad,
     max_bend), insertion up to min(20 mm, max), tip inside the view within 0.7 of the half-angle and
     >= 60 % of the psps inside the cone. Generated once per process from a fixed seed per split.
     """

@@ -28,14 +28,14 @@ POSITION_ERROR_SCALE = 0.05  # m
 #: the target frame (rad), both in {w}.
 TARGET_SHIFT_SCALE = np.array([0.02, 0.5])
 REWARD_TERMS = ("overlap", "position", "orientation", "action", "overlap_bonus")
-#: The coverage map's success criterion (ERRATA §2): OR above it counts as reproducing the view.
+#: The coverage map's success criterion (paper-notes §2): OR above it counts as reproducing the view.
 OVERLAP_BONUS_THRESHOLD = 0.8
 N_REWARD_TERMS = len(REWARD_TERMS)
 
 
 @njit(cache=True)
 def davinci_pose(q_dv, alpha, Le, lower, upper, p_cam, R_cam, p_tgt):
-    """da Vinci camera (= target) frame and target point for q_dv clipped to its ranges (ERRATA §2.2)."""
+    """da Vinci camera (= target) frame and target point for q_dv clipped to its ranges (paper-notes §2.2)."""
     L = min(max(q_dv[0], lower[0]), upper[0])
     yaw = min(max(q_dv[1], lower[1]), upper[1])
     pitch = min(max(q_dv[2], lower[2]), upper[2])

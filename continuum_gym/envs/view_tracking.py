@@ -201,7 +201,7 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     A 6-DoF continuum endoscope (stem insertion L0, stem rotation phi, two bending segments) must place
     its view where a da Vinci 30-degree endoscope pivoting about the remote centre looks: its visual
     target point ct and camera frame must match the da Vinci's target frame. Kinematics: paper 001 with
-    ERRATA §2 (SI at the interface; the paper's IK arithmetic in mm inside). Scored by the exact
+    paper-notes §2 (SI at the interface; the paper's IK arithmetic in mm inside). Scored by the exact
     overlap ratio (OR) of the two square 90-degree view frustums (near 0.03 m, far 0.12 m).
 
     The action is a residual added to an analytic baseline (``base_controller``, default

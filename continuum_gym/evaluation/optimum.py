@@ -16,7 +16,7 @@
   limits, and the raw starts are candidates too, so the optimum is never below any of them.
 
   *Roll.* The frustum is square, so it is symmetric under image rolls of 90 degrees: OR does not see
-  roll flips (ERRATA §4). The optimum maximises OR only; it may reach it with the continuum image
+  roll flips (paper-notes §4). The optimum maximises OR only; it may reach it with the continuum image
   rolled by about 90 or 180 degrees against the da Vinci image. ``roll_error`` reports that roll
   (angle of the continuum camera's x axis in the da Vinci image plane) for each solution.
 

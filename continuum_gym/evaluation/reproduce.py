@@ -1,6 +1,6 @@
 """``continuum-gym reproduce``: every published result of both papers, with figures, a table and JSON.
 
-Parts (ERRATA §3 gives the bands a faithful implementation lands in):
+Parts (paper-notes §3 gives the bands a faithful implementation lands in):
 1. paper 000 task (a): hold psi_a's tip pose for 1500 iterations at 1 ms (projected gradient, gamma fixed),
    and the same from >= 50 seeded random starts with VOI ≈ 0.25;
 2. paper 000 task (b): the 10 mm circle, minimum-norm vs projected gradient, gamma by eq (24);
@@ -120,7 +120,7 @@ def circle_part(robot):
             "max_tip_error_m": float(error.max()),
             "max_bend_deg": float(np.degrees(np.abs(robot.bend_angles(q)).max())),
         }
-    # gamma depends only on the tip (ERRATA §1.3 item 10): the paper reports one range.
+    # gamma depends only on the tip (paper-notes §1.3 item 10): the paper reports one range.
     result["gamma_min_deg"] = result["projected_gradient"]["gamma_min_deg"]
     result["gamma_max_deg"] = result["projected_gradient"]["gamma_max_deg"]
     return result
@@ -212,7 +212,7 @@ def markdown_table(results) -> str:
          f"{(cov['dimension_reduced_percent'] / max(cov['resolved_rate_percent'], 1e-9) - 1) * 100:+.1f} %",
          "DR >= 1.5 x RMRC"),
     ]
-    lines = ["| result | paper | this library | ERRATA band |", "|---|---|---|---|"]
+    lines = ["| result | paper | this library | paper-notes §3 band |", "|---|---|---|---|"]
     lines += [f"| {a} | {b} | {c_} | {d} |" for a, b, c_, d in rows]
     lines.append("")
     lines.append("Wall time per part: " + ", ".join(f"{k} {v:.1f} s" for k, v in results["seconds"].items()))

@@ -1,9 +1,9 @@
 """Repulsive force field of the view cone and the gradient of the potential Pi (paper 000, eqs 12, 18-19).
 
 f = f* (r*/r)^q (1 - d/d_0)^(2p) f_hat for d <= d_0 and r >= 0, else 0 (eq 18 with p = 1, q = 2 from
-Fig. 2-b, ERRATA §1.3 item 8); f_hat = grad d, the outward normal (eq 19). The formula is singular at
+Fig. 2-b, paper-notes §1.3 item 8); f_hat = grad d, the outward normal (eq 19). The formula is singular at
 the vertex (r -> 0) and directionless on the axis (rho = 0): both return zero force.
-grad Pi = grad E - sum_i Jv_i^T f_i (eq 12, ERRATA §1.3 item 5).
+grad Pi = grad E - sum_i Jv_i^T f_i (eq 12, paper-notes §1.3 item 5).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from continuum_gym.geometry.lens_cone import (
 from continuum_gym.robots.mbcr import DOF, PAPER_PSPS, _as_q, all_finite, make_workspace, points_kernel
 from continuum_gym.robots.validation import positive
 
-# Below these the force is singular (vertex) or has no direction (axis): ERRATA §1.3 item 8.
+# Below these the force is singular (vertex) or has no direction (axis): paper-notes §1.3 item 8.
 VERTEX_EPS = 1e-9
 AXIS_EPS = 1e-12
 
@@ -72,7 +72,7 @@ def resolve_field(field) -> ForceField:
 
 @njit(cache=True)
 def force_kernel(px, py, pz, gamma, d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp):
-    """World force (N) on one point (m): eq (18)-(19) with ERRATA §1.3 item 8. Returns (fx, fy, fz)."""
+    """World force (N) on one point (m): eq (18)-(19) with paper-notes §1.3 item 8. Returns (fx, fy, fz)."""
     xl, yl, zl = to_lens(px, py, pz, gamma, d_o, alpha, model)
     d, r, rho = cone_distance_slant(xl, yl, zl, beta)
     if d > d0 or r < VERTEX_EPS or rho < AXIS_EPS:
@@ -142,7 +142,7 @@ def potential_gradient(robot, q, gamma, cone=None, field=None, psps=PAPER_PSPS):
         q: configuration(s) (..., 7).
         gamma: endoscope rotation (rad), broadcasts with q[..., 0].
         cone, field: ``LensCone`` and ``ForceField`` (None: the paper's).
-        psps: (segment, arc fraction) pairs; default the paper's 10 (ERRATA §1.5).
+        psps: (segment, arc fraction) pairs; default the paper's 10 (paper-notes §1.5).
     """
     cone = resolve_cone(cone)
     field = resolve_field(field)

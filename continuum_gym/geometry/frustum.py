@@ -1,4 +1,4 @@
-"""Square viewing frustum of a camera (Deng–Xu, ERRATA §2.4).
+"""Square viewing frustum of a camera (Deng–Xu, paper-notes §2.4).
 
 The frustum's apex is at the camera position ``p`` and its axis is the camera's z-axis ``R[:, 2]``.
 Its cross-section is a square aligned with the camera's x and y axes, with the same full angle in
@@ -45,7 +45,7 @@ class Frustum:
     """Square truncated viewing pyramid in SI units.
 
     Attributes:
-        full_angle: full opening angle in x and in y (rad), in (0, π). Paper 001: 90° (ERRATA §2.4).
+        full_angle: full opening angle in x and in y (rad), in (0, π). Paper 001: 90° (paper-notes §2.4).
         near: distance of the near plane along the camera axis (m), > 0. Paper 001: 30 mm.
         far: distance of the far plane along the camera axis (m), > near. Paper 001: 120 mm.
     """
@@ -135,7 +135,7 @@ class Frustum:
     def sample_uniform(self, n: int, rng) -> np.ndarray:
         """``n`` points uniformly distributed in the frustum, in its own camera frame, shape (n, 3).
 
-        ERRATA §2.4: z = (near³ + u (far³ − near³))^(1/3) with u ~ U(0, 1), then x, y ~ U(−t z, t z).
+        paper-notes §2.4: z = (near³ + u (far³ − near³))^(1/3) with u ~ U(0, 1), then x, y ~ U(−t z, t z).
         ``rng`` is a ``numpy.random.Generator`` (or a seed passed to ``numpy.random.default_rng``).
         """
         if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:

@@ -1,14 +1,14 @@
 """Field-of-view cone of the rotating angled-lens endoscope of Sarli & Simaan (paper 000).
 
 The lens frame is {lens} with ^{lens}R_w = Ry(alpha) Rz(-gamma) (eq 15). Two readings of the lens
-origin (ERRATA §1.3 item 7), equal at gamma = 0:
+origin (paper-notes §1.3 item 7), equal at gamma = 0:
 
 - ``"literal"`` (default, as printed): x_l = ^{lens}R_w p + [0, -d_o, 0]; the view orbits z_w with gamma.
 - ``"physical"``: the endoscope spins about its own shaft through [0, d_o, 0]:
   x_l = ^{lens}R_w (p - [0, d_o, 0]).
 
 Canonical distance d (< 0 inside) and slant height r of a point are eqs (16)-(17); the centre
-distance d_c of the tip and its gamma-derivative are eq (25) as ERRATA §1.3 item 10 reads it.
+distance d_c of the tip and its gamma-derivative are eq (25) as paper-notes §1.3 item 10 reads it.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class LensCone:
         d_o: centre distance between robot and endoscope channels (m), 4.47 mm.
         alpha: lens inclination angle (rad), 30 degrees; in (0, pi/2).
         beta: cone half-angle (rad), 27.5 degrees; in (0, pi/2).
-        lens_model: ``"literal"`` or ``"physical"`` (ERRATA §1.3 item 7).
+        lens_model: ``"literal"`` or ``"physical"`` (paper-notes §1.3 item 7).
     """
 
     d_o: float = 4.47e-3
@@ -117,7 +117,7 @@ def cone_distance_slant(xl, yl, zl, beta):
 
 @njit(cache=True)
 def centre_distance_kernel(p, gamma, d_o, alpha, model):
-    """(d_c, dd_c/dgamma) of the tip p (m): ERRATA §1.3 item 10 (d_c = rho_ee).
+    """(d_c, dd_c/dgamma) of the tip p (m): paper-notes §1.3 item 10 (d_c = rho_ee).
 
     dx_l/dgamma = -^{lens}R_w (e3 x (p - c)), c = 0 (literal) or [0, d_o, 0] (physical).
     """
@@ -187,7 +187,7 @@ def cone_coordinates(points, gamma, cone=None):
 
 
 def centre_distance(tip, gamma, cone=None):
-    """Tip-to-view-axis distance d_c (m, eq 25 read as rho_ee) and dd_c/dgamma (m/rad, ERRATA §1.3 item 10).
+    """Tip-to-view-axis distance d_c (m, eq 25 read as rho_ee) and dd_c/dgamma (m/rad, paper-notes §1.3 item 10).
 
     Returns (d_c, dd_c_dgamma), each of the broadcast shape of tip[..., 0] and gamma.
     """

@@ -1,4 +1,4 @@
-"""Visual Occlusion Index (VOI) of paper 000, eq (27), exactly as ERRATA §1.3 item 13 reads it.
+"""Visual Occlusion Index (VOI) of paper 000, eq (27), exactly as paper-notes §1.3 item 13 reads it.
 
 VOI = [sin nu / (2 sin beta cos(nu - beta))]^2 (1 - (r_e/r_max)^3): the squared fraction of the cone
 diameter swept by the body, times the fraction of the cone volume between slant heights r_e and r_max.
@@ -154,7 +154,7 @@ def occlusion_details(robot, q, gamma, cone=None, n_per_segment: int = VOI_SAMPL
 
 
 def visual_occlusion_index(robot, q, gamma, cone=None) -> np.ndarray:
-    """Visual Occlusion Index (eq 27, ERRATA §1.3 item 13) of shape q.shape[:-1] (0-d for one q).
+    """Visual Occlusion Index (eq 27, paper-notes §1.3 item 13) of shape q.shape[:-1] (0-d for one q).
 
     Args:
         robot: a ``MultiBackboneRobot``.

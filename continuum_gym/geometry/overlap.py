@@ -1,4 +1,4 @@
-"""Overlap ratio of two camera frustums, OR = vol(F_a ∩ F_b) / vol(F_a) (Deng–Xu, ERRATA §2.4).
+"""Overlap ratio of two camera frustums, OR = vol(F_a ∩ F_b) / vol(F_a) (Deng–Xu, paper-notes §2.4).
 
 Three implementations of the same number:
 
@@ -18,7 +18,7 @@ Three implementations of the same number:
   Q − s·P and face Q by P − s·Q = −s·(Q − s·P) (s = sign(n_P·n_Q)), which equal Q and P on the
   respective face planes but are one and the same functional: the cuts coincide and OR stays
   exact (1e-15 against scipy for tilts from 1e-14 to 1e-4 rad).
-* :func:`overlap_ratio_reference` — the polytope-library recipe of ERRATA §2.4 (scipy: Chebyshev
+* :func:`overlap_ratio_reference` — the polytope-library recipe of paper-notes §2.4 (scipy: Chebyshev
   centre by ``linprog``/HiGHS, ``HalfspaceIntersection``, ``ConvexHull``); one pair, slow; the
   test reference.
 * :func:`overlap_ratio_monte_carlo` — fraction of uniform samples of F_a that fall inside F_b.
@@ -48,7 +48,7 @@ COPLANAR_NORMAL_TOL = 1e-12
 COPLANAR_OFFSET_TOL = 1e-12
 #: Rotation matrices must satisfy max |RᵀR − I| <= ROTATION_TOL and det R > 0.
 ROTATION_TOL = 1e-6
-#: Chebyshev radius (m) below which the reference treats the intersection as empty (ERRATA §2.4).
+#: Chebyshev radius (m) below which the reference treats the intersection as empty (paper-notes §2.4).
 REFERENCE_MIN_RADIUS = 1e-10
 
 _DEFAULT_FRUSTUM = Frustum()
@@ -398,7 +398,7 @@ def _raise(code: int, index=None) -> None:
 
 
 def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndarray:
-    """Exact overlap ratio OR = vol(F_a ∩ F_b) / vol(F_a) of two camera frustums (ERRATA §2.4).
+    """Exact overlap ratio OR = vol(F_a ∩ F_b) / vol(F_a) of two camera frustums (paper-notes §2.4).
 
     Args:
         p_a, p_b: camera positions in {w} (m), shape (..., 3).
@@ -473,7 +473,7 @@ def _pose(p, R, name_p: str, name_R: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def overlap_ratio_reference(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> float:
-    """OR of one pair by the polytope-library recipe of ERRATA §2.4 (slow; the test reference).
+    """OR of one pair by the polytope-library recipe of paper-notes §2.4 (slow; the test reference).
 
     Stacks the 12 world half-spaces A x + b <= 0, finds the Chebyshev centre with
     ``scipy.optimize.linprog`` (HiGHS): maximise s s.t. a_iᵀx + s‖a_i‖ <= −b_i, s >= 0. OR = 0 if

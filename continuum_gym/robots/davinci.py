@@ -1,16 +1,16 @@
 """Rigid angled da Vinci endoscope pivoting about the remote centre.
 
-Paper 001, §II.B, eqs (1) and (2), corrected per ERRATA §2.2 and §2.3 item 1.
+Paper 001, §II.B, eqs (1) and (2), corrected per paper-notes §2.2 and §2.3 item 1.
 
 Configuration ``q = [L_dV, yaw, pitch, roll]``: ``L_dV`` in m (insertion past the remote centre,
 which is the origin of {w}), angles in rad. ``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)``; the camera
-sits at ``w_R_dV3 [0, 0, L_dV]``. With the default ``alpha_convention="eq2"`` (ERRATA §2.3 item 1):
+sits at ``w_R_dV3 [0, 0, L_dV]``. With the default ``alpha_convention="eq2"`` (paper-notes §2.3 item 1):
 
     camera frame / visual target frame   w_R_dVt = w_R_dV3 Rx(-alpha)          (eq 1 corrected)
     visual target point                  w_p_dVt = cam + w_R_dV3 Le [0, sin alpha, cos alpha]   (eq 2)
 
 so the camera's z-axis (the optical axis) points at the target. ``"eq1"`` is the alternative the
-errata allow as an option: keep eq (1) with Rx(+alpha) and flip sin(alpha) in eq (2).
+paper notes allow as an option: keep eq (1) with Rx(+alpha) and flip sin(alpha) in eq (2).
 
 All lengths in m. Vectorised numpy; any finite q is accepted (limits are only data).
 """
@@ -61,7 +61,7 @@ class DaVinciEndoscope:
     Parameters:
         alpha: viewing angle (rad) between the stem axis and the optical axis, in (-pi/2, pi/2); default pi/6.
         Le: effective view distance from the camera to the visual target point (m, > 0); default 0.120.
-        alpha_convention: ``"eq2"`` (default, ERRATA §2.3 item 1: R = R3 Rx(-alpha), eq 2 as printed) or
+        alpha_convention: ``"eq2"`` (default, paper-notes §2.3 item 1: R = R3 Rx(-alpha), eq 2 as printed) or
             ``"eq1"`` (eq 1 as printed with Rx(+alpha), sin(alpha) flipped in eq 2).
 
     ``q = [L_dV (m), yaw, pitch, roll (rad)]``; every method accepts shape (4,) or (..., 4).
@@ -108,17 +108,17 @@ class DaVinciEndoscope:
 
     @property
     def home(self):
-        """Centre of the coverage map (ERRATA §2.6): L_dV = 0.065 m, yaw = pitch = roll = 0."""
+        """Centre of the coverage map (paper-notes §2.6): L_dV = 0.065 m, yaw = pitch = roll = 0."""
         return np.array([0.065, 0.0, 0.0, 0.0])
 
     @property
     def case1(self):
-        """Case study 1 (ERRATA §2.1): L_dV = 0.06088 m, yaw 0.5, pitch -0.4, roll 0."""
+        """Case study 1 (paper-notes §2.1): L_dV = 0.06088 m, yaw 0.5, pitch -0.4, roll 0."""
         return np.array([0.06088, 0.5, -0.4, 0.0])
 
     @property
     def case2(self):
-        """Case study 2 (ERRATA §2.1): L_dV = 0.0625 m, yaw -0.9, pitch 0.7, roll 0."""
+        """Case study 2 (paper-notes §2.1): L_dV = 0.0625 m, yaw -0.9, pitch 0.7, roll 0."""
         return np.array([0.0625, -0.9, 0.7, 0.0])
 
     @property
@@ -151,7 +151,7 @@ class DaVinciEndoscope:
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
         ``p = R3 [0, 0, L_dV]`` (the stem tip, eq 2 first term); ``R = R3 Rx(-alpha)`` (eq 1 corrected,
-        ERRATA §2.3 item 1), whose z-axis is the optical axis pointing at the target point.
+        paper-notes §2.3 item 1), whose z-axis is the optical axis pointing at the target point.
         """
         p_cam, w_R_cam, _ = self._poses(q)
         return p_cam, w_R_cam
@@ -160,7 +160,7 @@ class DaVinciEndoscope:
         """Visual target frame the continuum endoscope must reach: ``(w_p_dVt (..., 3) in m, w_R_dVt)``.
 
         ``w_p_dVt = cam + R3 Le [0, sin alpha, cos alpha]`` (eq 2), ``w_R_dVt = R3 Rx(-alpha)`` (eq 1
-        corrected, ERRATA §2.3 item 1); both with alpha's sign flipped under ``alpha_convention="eq1"``.
+        corrected, paper-notes §2.3 item 1); both with alpha's sign flipped under ``alpha_convention="eq1"``.
         """
         _, w_R_cam, p_t = self._poses(q)
         return p_t, w_R_cam

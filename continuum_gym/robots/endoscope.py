@@ -1,7 +1,7 @@
-"""Two-segment continuum endoscope of Deng, Xu et al. (paper 001), corrected per ERRATA §2.
+"""Two-segment continuum endoscope of Deng, Xu et al. (paper 001), corrected per paper-notes §2.
 
 Configuration ``q = [L0, phi, theta1, delta1, theta2, delta2]`` in SI units: ``L0`` in m (stem
-insertion), every angle in rad. ``theta = 0`` is a straight segment (Xu's convention, ERRATA §2.1);
+insertion), every angle in rad. ``theta = 0`` is a straight segment (Xu's convention, paper-notes §2.1);
 the bending direction of segment t in {tb} is ``(cos delta, -sin delta, 0)``.
 
 Frames (paper Fig. 2c): {w} at the incision; {1b} = {w} translated by ``[0, 0, L0]`` and rotated
@@ -32,7 +32,7 @@ __all__ = [
     "endoscope_segment_jacobian",
 ]
 
-#: |theta| below which the series of ERRATA §2.2 replace the closed forms of eqs (3), (5).
+#: |theta| below which the series of paper-notes §2.2 replace the closed forms of eqs (3), (5).
 SERIES_THRESHOLD = 2e-3
 
 _DOF = 6
@@ -47,7 +47,7 @@ def _bend_terms(theta):
 
     ``s = sin(theta)``, ``omc = 1 - cos(theta)`` (via the half angle, no cancellation),
     ``a = (1 - cos)/theta``, ``b = sin/theta`` and their derivatives ``da``, ``db`` in theta.
-    Below ``SERIES_THRESHOLD`` the series of ERRATA §2.2 are used, so all are exact and finite
+    Below ``SERIES_THRESHOLD`` the series of paper-notes §2.2 are used, so all are exact and finite
     at theta = 0.
     """
     sh = math.sin(0.5 * theta)
@@ -70,7 +70,7 @@ def _bend_terms(theta):
 
 @njit(cache=True, inline="always")
 def _segment_rotation(s, omc, cd, sd, R):
-    """Write ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (eq 4 corrected, ERRATA §2.3 item 2) into R."""
+    """Write ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (eq 4 corrected, paper-notes §2.3 item 2) into R."""
     R[0, 0] = 1.0 - omc * cd * cd
     R[0, 1] = omc * cd * sd
     R[0, 2] = s * cd
@@ -149,7 +149,7 @@ def _kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian, R1, W1, R2)
     if not with_jacobian:
         return
 
-    # ---- eq (9) with ERRATA §2.2 / §2.3 item 3, assembled directly in {w} ----
+    # ---- eq (9) with paper-notes §2.2 / §2.3 item 3, assembled directly in {w} ----
     # column L0: J0v = e3, J0w = 0
     J[0, 0] = 0.0
     J[1, 0] = 0.0
@@ -371,11 +371,11 @@ def _segment_args(theta, delta, length):
 
 
 def endoscope_segment_pose(theta, delta, length):
-    """Pose of {te} in {tb} of one constant-curvature segment (eqs 3 and 4, ERRATA §2.3 item 2).
+    """Pose of {te} in {tb} of one constant-curvature segment (eqs 3 and 4, paper-notes §2.3 item 2).
 
     ``theta`` (rad, 0 = straight), ``delta`` (rad) broadcast together; ``length`` in m.
     Returns ``tb_p_te`` (..., 3) in m and ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (..., 3, 3).
-    Exact and finite at theta = 0 (series of ERRATA §2.2 below ``SERIES_THRESHOLD``).
+    Exact and finite at theta = 0 (series of paper-notes §2.2 below ``SERIES_THRESHOLD``).
     """
     theta, delta, length = _segment_args(theta, delta, length)
     s, omc, a, b, _, _ = _bend_terms_np(theta)
@@ -396,7 +396,7 @@ def endoscope_segment_jacobian(theta, delta, length):
     """Twist Jacobian of {te}'s origin in {tb} per [theta, delta] rate (eqs 5 and 6, as printed).
 
     Returns (..., 6, 2): rows [J_tv (m/rad); J_tw (rad/rad)], columns theta, delta. ``length`` in m.
-    Below ``SERIES_THRESHOLD`` uses the series of ERRATA §2.2 (exact and finite at theta = 0).
+    Below ``SERIES_THRESHOLD`` uses the series of paper-notes §2.2 (exact and finite at theta = 0).
     """
     theta, delta, length = _segment_args(theta, delta, length)
     s, omc, a, _, da, db = _bend_terms_np(theta)
@@ -417,7 +417,7 @@ def endoscope_segment_jacobian(theta, delta, length):
 # Robot class
 # ----------------------------------------------------------------------------------------------
 class ContinuumEndoscope:
-    """6-DoF two-segment continuum endoscope (paper 001, Fig. 2c, Table II; ERRATA §2).
+    """6-DoF two-segment continuum endoscope (paper 001, Fig. 2c, Table II; paper-notes §2).
 
     Parameters (all lengths in m, each must be finite and > 0):
         L1: length of segment 1 (default 0.020).
@@ -444,7 +444,7 @@ class ContinuumEndoscope:
             ]
         )
         self._geom.flags.writeable = False
-        # Table II / ERRATA §2.1: L0 in m; phi hard limit; deltas unlimited (wrapped by controllers)
+        # Table II / paper-notes §2.1: L0 in m; phi hard limit; deltas unlimited (wrapped by controllers)
         self._lower = np.array([0.0, -np.pi, 0.0, -np.inf, 0.0, -np.inf])
         self._upper = np.array([0.100, np.pi, np.pi / 4, np.inf, np.pi / 2, np.inf])
         self._lower.flags.writeable = False
@@ -470,7 +470,7 @@ class ContinuumEndoscope:
     def joint_limits(self):
         """``(lower, upper)``, each shape (6,): L0 in m, angles in rad; deltas are ±inf.
 
-        Table II / ERRATA §2.1: L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4],
+        Table II / paper-notes §2.1: L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4],
         theta2 in [0, pi/2]. Fresh copies.
         """
         return self._lower.copy(), self._upper.copy()
@@ -483,7 +483,7 @@ class ContinuumEndoscope:
 
     @property
     def case_study_start(self):
-        """Psi0 of the case studies (ERRATA §2.1): [0.008 m, 0, 0.3857, -1.57, 0.7828, 1.57]."""
+        """Psi0 of the case studies (paper-notes §2.1): [0.008 m, 0, 0.3857, -1.57, 0.7828, 1.57]."""
         return np.array([0.008, 0.0, 0.3857, -1.57, 0.7828, 1.57])
 
     home = case_study_start
@@ -552,7 +552,7 @@ class ContinuumEndoscope:
     def forward_kinematics(self, q):
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
-        Eqs (3), (4), (7), (8) with ERRATA §2.2 and §2.3 item 2. The camera sits ``Lc`` along z_2e
+        Eqs (3), (4), (7), (8) with paper-notes §2.2 and §2.3 item 2. The camera sits ``Lc`` along z_2e
         from the end of segment 2; ``R = w_R_ct = w_R_2e``, its z-axis is the viewing axis.
         """
         p_cam, w_R_cam, _, _ = self._run(q, False)
@@ -563,18 +563,18 @@ class ContinuumEndoscope:
         return self._run(q, False)[2]
 
     def target_pose(self, q):
-        """``(w_p_ct (..., 3) in m, w_R_ct (..., 3, 3))`` (eqs 7 and 8 with ERRATA §2.2 / §2.3 item 2)."""
+        """``(w_p_ct (..., 3) in m, w_R_ct (..., 3, 3))`` (eqs 7 and 8 with paper-notes §2.2 / §2.3 item 2)."""
         _, w_R_ct, p_ct, _ = self._run(q, False)
         return p_ct, w_R_ct
 
     def jacobian(self, q):
         """Twist Jacobian of the target point ct in {w}: (..., 6, 6).
 
-        Eq (9) corrected per ERRATA §2.2 and §2.3 item 3.
+        Eq (9) corrected per paper-notes §2.2 and §2.3 item 3.
 
         Rows ``[v (m/s); w (rad/s)]``; columns per rate of L0 (m/s), phi, theta1, delta1, theta2,
         delta2 (rad/s). J0v = [e3, 0], J0w = [0, e3]; T_t = J_tv - (lever from segment t's end to ct)^ J_tw,
-        with J_tv, J_tw of eqs (5), (6) (series of ERRATA §2.2 near straight).
+        with J_tv, J_tw of eqs (5), (6) (series of paper-notes §2.2 near straight).
         """
         return self._run(q, True)[3]
 

@@ -1,12 +1,12 @@
 """The 3-segment multi-backbone continuum robot (MBCR) with insertion of Sarli & Simaan (paper 000).
 
 Configuration q = [theta1, delta1, theta2, delta2, theta3, delta3, q_ins] (rad, rad, ..., m), with
-Simaan's convention theta = pi/2 straight (ERRATA §1.1). World frame {w}: centred on the robot-channel
+Simaan's convention theta = pi/2 straight (paper-notes §1.1). World frame {w}: centred on the robot-channel
 exit, z along the sheath; the base of segment 1 is at [0, 0, q_ins].
 
-Kinematics follows ERRATA §1.2 (eqs 2-8 corrected): eq (4) uses (g_j - g_3)^ R_{j-1} (erratum 1),
-eq (5) is the ordered product (erratum 2), eq (7) includes the insertion (erratum 3). Near straight the
-chi functions switch to the series of ERRATA §1.4.
+Kinematics follows paper-notes §1.2 (eqs 2-8 corrected): eq (4) uses (g_j - g_3)^ R_{j-1} (paper-notes §1.3 item 1),
+eq (5) is the ordered product (paper-notes §1.3 item 2), eq (7) includes the insertion (paper-notes §1.3 item 3). Near straight the
+chi functions switch to the series of paper-notes §1.4.
 
 The compiled kernels (``_frames``, ``_tip_kernel``, ``_points_kernel``, ``_backbone_kernel``) are
 public to the package so that baselines and environments can call them inside their own kernels.
@@ -26,7 +26,7 @@ from continuum_gym.robots.validation import as_configuration, positive
 HALF_PI = 0.5 * math.pi
 DOF = 7
 
-# Points subject to potential (ERRATA §1.5, paper 000 section V): (segment, arc fraction).
+# Points subject to potential (paper-notes §1.5, paper 000 section V): (segment, arc fraction).
 PAPER_PSPS = (
     (0, 0.5), (0, 0.75), (0, 1.0),
     (1, 0.25), (1, 0.5), (1, 0.75), (1, 1.0),
@@ -84,7 +84,7 @@ def point_columns(q, lengths, ws, segment, sigma, point, Jv, Jw, with_angular):
     """Columns of the twist of a body point (segment, sigma) at world position ``point``.
 
     Needs ``frames`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
-    (g_k - point)^ R_{k-1} J_{k,w} (eq 4 corrected, ERRATA §1.2); own segment evaluated at sigma;
+    (g_k - point)^ R_{k-1} J_{k,w} (eq 4 corrected, paper-notes §1.2); own segment evaluated at sigma;
     distal columns 0; insertion column e3. ``Jw`` is filled only when ``with_angular``.
     """
     R_base, g_base, jv, jw = ws[0], ws[1], ws[4], ws[5]
@@ -147,7 +147,7 @@ def body_point(q, lengths, ws, segment, sigma, out):
 
 @njit(cache=True)
 def tip_kernel(q, lengths, ws, p, R, J):
-    """Tip position, rotation and 6x7 Jacobian [v; w] in {w} (eq 2 with ERRATA §1.2) for one q."""
+    """Tip position, rotation and 6x7 Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q."""
     frames(q, lengths, ws)
     R_base, g_base, Jv, Jw = ws[0], ws[1], ws[6], ws[7]
     for a in range(3):
@@ -201,7 +201,7 @@ def _points_batch(qs, lengths, segments, fractions, P, JV):
 
 @njit(cache=True)
 def backbone_kernel(q, lengths, ws, n_insert, n_per_segment, out):
-    """Backbone samples from the channel exit (ERRATA §1.3 item 13).
+    """Backbone samples from the channel exit (paper-notes §1.3 item 13).
 
     ``n_insert`` samples from the origin toward [0, 0, q_ins] (the first at the origin, the last one
     step before the base of segment 1), then arc fractions k/n for k = 0..n on segment 1 and k = 1..n
@@ -279,11 +279,11 @@ class MultiBackboneRobot:
 
     Args:
         lengths: segment arc lengths (m), Table I: (26, 20, 19) mm.
-        youngs_modulus: backbone Young's modulus (Pa); NiTi 60 GPa (ERRATA §1.5 assumption).
-        primary_diameter: primary backbone diameter (m), 0.6 mm (ERRATA §1.5).
-        secondary_diameter: secondary backbone diameter (m), 0.4 mm (ERRATA §1.5).
+        youngs_modulus: backbone Young's modulus (Pa); NiTi 60 GPa (paper-notes §1.5 assumption).
+        primary_diameter: primary backbone diameter (m), 0.6 mm (paper-notes §1.5).
+        secondary_diameter: secondary backbone diameter (m), 0.4 mm (paper-notes §1.5).
         n_secondary: secondary backbones per segment (3).
-        n_insert_samples: samples of the straight inserted part used by ``backbone`` (ERRATA §1.3 item 13: 5).
+        n_insert_samples: samples of the straight inserted part used by ``backbone`` (paper-notes §1.3 item 13: 5).
     """
 
     lengths: tuple = (0.026, 0.020, 0.019)
@@ -297,11 +297,11 @@ class MultiBackboneRobot:
     dof = DOF
     #: All segments straight, no insertion.
     straight = np.array([HALF_PI, 0.0, HALF_PI, 0.0, HALF_PI, 0.0, 0.0])
-    #: Task (a) start configuration psi_a of ERRATA §1.5 (VOI 0.25 at gamma = 0).
+    #: Task (a) start configuration psi_a of paper-notes §1.5 (VOI 0.25 at gamma = 0).
     psi_a = np.array([0.981411417978988, -2.1391814000492557, 1.4343256703283846,
                       -0.484339338133009, 1.1014459391296132, -2.285467909847507,
                       0.009283887491045915])
-    #: Task (b) (circle) start configuration psi_b of ERRATA §1.5.
+    #: Task (b) (circle) start configuration psi_b of paper-notes §1.5.
     psi_b = np.array([1.1571463096352517, -2.7733740222436865, 1.3778194554049983, 2.704865019865162,
                       1.5026076079767348, 1.031851192490949, 0.002099818575749484])
     home = psi_a
@@ -324,7 +324,7 @@ class MultiBackboneRobot:
 
     # ------------------------------------------------------------------ kinematics
     def forward_kinematics(self, q):
-        """Tip pose in {w}: eqs (5)-(8) corrected (ERRATA §1.2, errata 2-3).
+        """Tip pose in {w}: eqs (5)-(8) corrected (paper-notes §1.2, paper-notes §1.3 items 2-3).
 
         Args:
             q: configuration(s), shape (..., 7): rad for angles, m for q_ins.
@@ -336,7 +336,7 @@ class MultiBackboneRobot:
         return p, R
 
     def jacobian(self, q):
-        """6x7 Jacobian of the tip twist [v; w] in {w} (eq 2, eq 4 corrected per ERRATA §1.3 item 1).
+        """6x7 Jacobian of the tip twist [v; w] in {w} (eq 2, eq 4 corrected per paper-notes §1.3 item 1).
 
         v is the velocity of the tip point g_3 (m/s per rad/s, and per m/s for q_ins).
         Returns shape (..., 6, 7).
@@ -348,7 +348,7 @@ class MultiBackboneRobot:
         return tip_pose_jacobian(q, self._lengths_array)
 
     def point_jacobian(self, q, segment, fraction):
-        """Position and translational Jacobian of a backbone point (eq 11; ERRATA §1.2).
+        """Position and translational Jacobian of a backbone point (eq 11; paper-notes §1.2).
 
         Args:
             q: configuration(s), shape (..., 7).
@@ -375,7 +375,7 @@ class MultiBackboneRobot:
         return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, 7))
 
     def backbone(self, q, n_per_segment: int = 40):
-        """Sampled backbone from the channel exit, as ERRATA §1.3 item 13 samples it for VOI.
+        """Sampled backbone from the channel exit, as paper-notes §1.3 item 13 samples it for VOI.
 
         The straight inserted part from the origin toward [0, 0, q_ins] (``n_insert_samples`` samples),
         then arc fractions k/n_per_segment on each segment (segment 1 from k = 0). Returns
@@ -395,7 +395,7 @@ class MultiBackboneRobot:
     # ------------------------------------------------------------------ elastic energy
     @property
     def stiffness(self) -> np.ndarray:
-        """Bending stiffness K_i = (E_p I_p + n_s E_s I_s)/l_i per segment (N·m/rad²), ERRATA §1.3 item 9."""
+        """Bending stiffness K_i = (E_p I_p + n_s E_s I_s)/l_i per segment (N·m/rad²), paper-notes §1.3 item 9."""
         inertia_primary = math.pi * self.primary_diameter**4 / 64.0
         inertia_secondary = math.pi * self.secondary_diameter**4 / 64.0
         flexural = self.youngs_modulus * (inertia_primary + self.n_secondary * inertia_secondary)
@@ -408,7 +408,7 @@ class MultiBackboneRobot:
         return 0.5 * np.sum(self.stiffness * bend**2, axis=-1)
 
     def elastic_energy_gradient(self, q):
-        """dE/dq, shape (..., 7): theta entries -K_i (pi/2 - theta_i), others 0 (ERRATA §1.3 item 9)."""
+        """dE/dq, shape (..., 7): theta entries -K_i (pi/2 - theta_i), others 0 (paper-notes §1.3 item 9)."""
         q = as_configuration(q, DOF)
         grad = np.zeros_like(q)
         grad[..., 0:6:2] = -self.stiffness * (HALF_PI - q[..., 0:6:2])

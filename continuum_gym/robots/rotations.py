@@ -79,7 +79,7 @@ def rotation_exp(w, out):
 
 @njit(cache=True)
 def orientation_error(R_des, R, work, out):
-    """log(R_des R^T) (rad), the world-frame rotation that takes R to R_des (ERRATA §1.3 item 11)."""
+    """log(R_des R^T) (rad), the world-frame rotation that takes R to R_des (paper-notes §1.3 item 11)."""
     for a in range(3):
         for b in range(3):
             acc = 0.0

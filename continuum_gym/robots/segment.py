@@ -1,7 +1,7 @@
 """One constant-curvature continuum segment, as compiled scalar kernels.
 
-Both papers use the same segment model (ERRATA §2.1: theta_001 = pi/2 - theta_000). The kernels here
-use the bend variable ``phi`` of ERRATA §1.2, phi = theta_000 - pi/2 = -theta_001, so that phi = 0 is
+Both papers use the same segment model (paper-notes §2.1: theta_001 = pi/2 - theta_000). The kernels here
+use the bend variable ``phi`` of paper-notes §1.2, phi = theta_000 - pi/2 = -theta_001, so that phi = 0 is
 straight in both conventions and a bend phi < 0 leans toward (cos delta, -sin delta, 0) of the base frame.
 
 Each kernel works on one segment and writes into caller-provided arrays, so the robot kernels can
@@ -21,10 +21,10 @@ SERIES_SWITCH = 2e-3
 
 @njit(cache=True, inline="always")
 def chi_functions(phi):
-    """Return (chi1, chi2, chi3, sinc) of ERRATA §1.2 at bend variable ``phi`` (rad).
+    """Return (chi1, chi2, chi3, sinc) of paper-notes §1.2 at bend variable ``phi`` (rad).
 
     chi3 = (cos phi - 1)/phi is the lateral shape factor, sinc = sin(phi)/phi the axial one,
-    chi1 = d chi3/d phi and chi2 = d sinc/d phi. Series of ERRATA §1.4 near phi = 0.
+    chi1 = d chi3/d phi and chi2 = d sinc/d phi. Series of paper-notes §1.4 near phi = 0.
     """
     if abs(phi) < SERIES_SWITCH:
         p2 = phi * phi
@@ -79,7 +79,7 @@ def segment_jacobian(phi, delta, length, sigma, jv, jw):
     """Twist of the point at arc fraction ``sigma`` per (d phi_end, d delta), in the segment base frame.
 
     With sigma = 1 this is eq (3) of paper 000 with the phi-derivative sign (d/d theta_000 = d/d phi).
-    For sigma < 1 it is ERRATA §1.2 "points on the body": chi functions at sigma*phi, and the phi
+    For sigma < 1 it is paper-notes §1.2 "points on the body": chi functions at sigma*phi, and the phi
     column carries the extra factor sigma (d phi_sigma / d phi = sigma). ``jv`` and ``jw`` are (3, 2).
     """
     chi1, chi2, chi3, _ = chi_functions(sigma * phi)
