@@ -21,9 +21,19 @@ from numpy_reference_endoscope import endoscope_fk_jacobian_numpy  # noqa: E402
 from numpy_reference_mbcr import fk_jacobian_numpy, potential_gradient_numpy, voi_numpy  # noqa: E402
 from numpy_reference_overlap import overlap_ratio_numpy  # noqa: E402
 
-from continuum_gym.geometry import Frustum, overlap_ratio, overlap_ratio_reference, potential_gradient  # noqa: E402
-from continuum_gym.geometry import visual_occlusion_index  # noqa: E402
-from continuum_gym.robots import PAPER_PSPS, ContinuumEndoscope, DaVinciEndoscope, MultiBackboneRobot  # noqa: E402
+from continuum_gym.geometry import (  # noqa: E402
+    Frustum,
+    overlap_ratio,
+    overlap_ratio_reference,
+    potential_gradient,
+    visual_occlusion_index,  # noqa: E402
+)
+from continuum_gym.robots import (  # noqa: E402
+    PAPER_PSPS,
+    ContinuumEndoscope,
+    DaVinciEndoscope,
+    MultiBackboneRobot,
+)
 
 BATCH = 4096
 

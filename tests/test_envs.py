@@ -14,8 +14,11 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import continuum_gym
 from continuum_gym.baselines import DimensionReduced, ProjectedGradient
-from continuum_gym.envs.occlusion import OcclusionAvoidanceEnv, OcclusionAvoidanceVectorEnv
 from continuum_gym.envs.common_kernels import trajectory_batch
+from continuum_gym.envs.occlusion import (
+    OcclusionAvoidanceEnv,
+    OcclusionAvoidanceVectorEnv,
+)
 from continuum_gym.envs.tasks import hold_start_pool
 from continuum_gym.envs.view_tracking import ViewTrackingEnv, ViewTrackingVectorEnv
 
@@ -320,7 +323,7 @@ def test_guard_gamma_rate_keeps_the_largest_feasible_share_of_the_residual():
     from continuum_gym.envs.occlusion_kernel import guard_gamma_rate, view_fraction_at
 
     core = OcclusionAvoidanceEnv(task="hold").core
-    prm = core.controller.params
+    prm = core.controller.params.cone
     rng = np.random.default_rng(0)
     shares = np.linspace(0.0, 1.0, 20001)
     checked = 0

@@ -213,7 +213,8 @@ def test_non_finite_raises(value):
 @pytest.mark.parametrize("kwargs, name", [
     ({"lengths": (0.026, 0.0, 0.019)}, "lengths"),
     ({"lengths": (0.026, -0.01, 0.019)}, "lengths"),
-    ({"lengths": (0.026, 0.02)}, "lengths"),
+    ({"lengths": ()}, "lengths"),
+    ({"lengths": (0.02,) * 5}, "lengths"),
     ({"youngs_modulus": 0.0}, "youngs_modulus"),
     ({"primary_diameter": -1e-3}, "primary_diameter"),
 ])

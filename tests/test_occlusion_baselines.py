@@ -7,7 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from continuum_gym.baselines.occlusion import MinimumNorm, OcclusionLimits, ProjectedGradient, wrap_angle
+from continuum_gym.baselines.occlusion import (
+    MinimumNorm,
+    OcclusionLimits,
+    ProjectedGradient,
+    wrap_angle,
+)
 from continuum_gym.baselines.scenarios import CircleTask, sample_hold_starts
 from continuum_gym.geometry.force_field import potential_gradient
 from continuum_gym.geometry.occlusion import visual_occlusion_index

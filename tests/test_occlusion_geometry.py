@@ -7,8 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from continuum_gym.geometry.force_field import ForceField, potential_gradient, repulsive_force
+from continuum_gym.geometry.force_field import (
+    ForceField,
+    potential_gradient,
+    repulsive_force,
+)
 from continuum_gym.geometry.lens_cone import (
+    ConeKernelArgs,
     LensCone,
     centre_distance,
     cone_coordinates,
@@ -16,7 +21,11 @@ from continuum_gym.geometry.lens_cone import (
     lens_rotation,
     view_axis,
 )
-from continuum_gym.geometry.occlusion import occlusion_details, visual_occlusion_index, voi_kernel
+from continuum_gym.geometry.occlusion import (
+    occlusion_details,
+    visual_occlusion_index,
+    voi_kernel,
+)
 from continuum_gym.robots.mbcr import MultiBackboneRobot
 from tests.conftest import fd_gradient
 
@@ -166,7 +175,8 @@ def _world_from_lens(lens_points, gamma=0.0):
 def _voi_of_path(lens_points, beta=CONE.beta):
     world = _world_from_lens(np.asarray(lens_points, dtype=float))
     m = world.shape[0]
-    return voi_kernel(world, 0.0, CONE.d_o, CONE.alpha, beta, 0, np.empty((m, 3)), np.empty((m, 2)))
+    cone = ConeKernelArgs(CONE.d_o, CONE.alpha, beta, 0)
+    return voi_kernel(world, 0.0, cone, np.empty((m, 3)), np.empty((m, 2)))
 
 
 def _lens_point(r_slant, angle_from_axis, azimuth=0.0):

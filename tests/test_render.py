@@ -12,11 +12,21 @@ import pytest
 pytest.importorskip("pybullet")
 
 from continuum_gym.baselines.scenarios import sample_hold_starts  # noqa: E402
-from continuum_gym.geometry.lens_cone import cone_coordinates, lens_origin, lens_rotation  # noqa: E402
+from continuum_gym.geometry.lens_cone import (  # noqa: E402
+    cone_coordinates,
+    lens_origin,
+    lens_rotation,
+)
 from continuum_gym.geometry.occlusion import visual_occlusion_index  # noqa: E402
 from continuum_gym.render import OcclusionScene, ViewTrackingScene, pixel_occlusion  # noqa: E402
 from continuum_gym.render.camera import (  # noqa: E402
-    fov_mask, look_at_frame, pixel_rays, projection_matrix, view_matrix, view_matrix_from_frame)
+    fov_mask,
+    look_at_frame,
+    pixel_rays,
+    projection_matrix,
+    view_matrix,
+    view_matrix_from_frame,
+)
 from continuum_gym.robots import MultiBackboneRobot  # noqa: E402
 
 ROBOT = MultiBackboneRobot()
@@ -69,7 +79,7 @@ def test_pixel_rays_match_rendered_depth():
     import pybullet as p
     from pybullet_utils import bullet_client
 
-    from continuum_gym.render.scene import _grid
+    from continuum_gym.render.meshes import grid_mesh as _grid
 
     client = bullet_client.BulletClient(connection_mode=p.DIRECT)
     try:

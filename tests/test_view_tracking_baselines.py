@@ -6,7 +6,11 @@ import numpy as np
 import pytest
 
 from continuum_gym.baselines import DimensionReduced, ResolvedRate, make_controller
-from continuum_gym.baselines.scenarios import CASE_STUDIES, CASE_STUDY_START, coverage_grid
+from continuum_gym.baselines.scenarios import (
+    CASE_STUDIES,
+    CASE_STUDY_START,
+    coverage_grid,
+)
 from continuum_gym.baselines.view_tracking import integrate_view_step
 from continuum_gym.geometry.overlap import overlap_ratio
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope

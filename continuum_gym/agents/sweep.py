@@ -31,7 +31,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from continuum_gym.agents.train import ALGOS, BASES, headline_metric, load_hyperparams, run_name, train, validate
+from continuum_gym.agents.train import (
+    ALGOS,
+    headline_metric,
+    load_hyperparams,
+    run_name,
+    train,
+    validate,
+)
+from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
 from continuum_gym.evaluation.statistics import summarize
 
@@ -144,7 +152,7 @@ def sweep(env_id, algo, base, seeds, steps=None, search=None, address=None, cpus
     sweep_dir.mkdir(parents=True, exist_ok=True)
     hp_file = Path(hyperparams).resolve() if hyperparams else None
     metric = headline_metric(env_id)
-    mode = "min" if metric == "mean_voi" else "max"
+    mode = "max" if get_spec(env_id).metric(metric).higher_is_better else "min"
     ray.init(address=address or os.environ.get("RAY_ADDRESS"), ignore_reinit_error=True,
              include_dashboard=False, log_to_driver=False)
     trainable = tune.with_resources(_trainable(env_id, algo, base, steps, sweep_dir, hp_file),
@@ -211,7 +219,7 @@ def summarise(results, metric, mode, env_id, algo, sweep_dir: Path, hp_file=None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--env", required=True, help=f"environment id: {sorted(BASES)}")
+    parser.add_argument("--env", required=True, help=f"environment id: {sorted(ENV_SPECS)}")
     parser.add_argument("--algo", default="ppo", help=f"one of {list(ALGOS)}")
     parser.add_argument("--base", default=None, help="base controller, or 'none' for pure RL")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="seeds: one trial per seed and config")
@@ -226,7 +234,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    base = None if (args.base or "").lower() == "none" else (args.base or BASES.get(args.env, (None,))[0])
+    base = None if (args.base or "").lower() == "none" else (args.base or _default_base(args.env))
     try:
         validate(args.env, args.algo, base)
         if args.search:
@@ -238,3 +246,10 @@ def run(args) -> int:
         print(f"continuum-gym sweep: {error}", file=sys.stderr)
         return 2
     return 0
+
+
+def _default_base(env_id: str):
+    try:
+        return get_spec(env_id).headline_baseline
+    except ValueError:
+        return None  # validate() reports the unknown id

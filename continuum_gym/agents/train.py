@@ -21,13 +21,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.evaluation.io import write_text_atomic
 
 ALGOS = ("ppo", "sac", "td3")
-BASES = {
-    "ContinuumGym/OcclusionAvoidance-v0": ("projected_gradient", "minimum_norm"),
-    "ContinuumGym/ViewTracking-v0": ("dimension_reduced", "resolved_rate"),
-}
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # Keys of a hyperparameter block that are not arguments of the SB3 algorithm.
 RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
@@ -71,12 +68,11 @@ def linear_schedule(value, name):
 
 
 def validate(env_id, algo, base):
-    if env_id not in BASES:
-        raise ValueError(f"unknown env {env_id!r}; valid: {sorted(BASES)}")
+    spec = get_spec(env_id)
     if algo not in ALGOS:
         raise ValueError(f"unknown algo {algo!r}; valid: {list(ALGOS)}")
-    if base is not None and base not in BASES[env_id]:
-        raise ValueError(f"unknown base {base!r} for {env_id}; valid: {list(BASES[env_id])} or none")
+    if base is not None and base not in spec.baselines:
+        raise ValueError(f"unknown base {base!r} for {env_id}; valid: {list(spec.baselines)} or none")
 
 
 def _algo_class(algo):
@@ -138,8 +134,8 @@ class AtomicCheckpoint:
 
 
 def headline_metric(env_id: str) -> str:
-    """The held-out metric a run is judged by (lower is better for VOI, higher for OR)."""
-    return "mean_voi" if "OcclusionAvoidance" in env_id else "mean_or"
+    """The held-out metric a run is judged by (its spec's; lower is better for VOI, higher for OR)."""
+    return get_spec(env_id).headline_metric
 
 
 def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=None):
@@ -195,8 +191,9 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
           hyperparams=None, progress=True, command=None, n_envs=None, report=None) -> Path:
     """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base."""
     if base == "__default__":
-        base = BASES.get(env_id, (None,))[0]
+        base = get_spec(env_id).headline_baseline
     validate(env_id, algo, base)
+    import numba
     import torch
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.noise import NormalActionNoise
@@ -205,8 +202,6 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
 
     from continuum_gym.agents.residual import ActorBurnIn, zero_init_residual
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
-
-    import numba
 
     # Runs are parallelised by process (--parallel); one thread each keeps them from fighting.
     torch.set_num_threads(1)
@@ -248,8 +243,9 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
         if base is not None:
             zero_init_residual(model)
     config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
-              "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs, "continuum_gym_version": _version(),
-              "git_commit": _git_commit(), "python": sys.version.split()[0]}
+              "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
+              "env_config": _base_vec_env(venv).core.config.to_dict(),
+              "continuum_gym_version": _version(), "git_commit": _git_commit(), "python": sys.version.split()[0]}
     write_text_atomic(run_dir / "config.yml", yaml.safe_dump(config, sort_keys=False))
     write_text_atomic(run_dir / "args.yml", yaml.safe_dump({"env": env_id, "algo": algo, "base": base or "none",
                                                             "seed": seed, "steps": total, "out": str(out),
@@ -272,6 +268,13 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
     return run_dir
 
 
+def _base_vec_env(venv):
+    """The ``ContinuumSB3VecEnv`` under SB3's wrappers (VecMonitor, VecNormalize)."""
+    while hasattr(venv, "venv"):
+        venv = venv.venv
+    return venv
+
+
 def _version():
     from continuum_gym import __version__
 
@@ -279,7 +282,7 @@ def _version():
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--env", required=True, help=f"environment id: {sorted(BASES)}")
+    parser.add_argument("--env", required=True, help=f"environment id: {sorted(ENV_SPECS)}")
     parser.add_argument("--algo", default="ppo", help=f"one of {list(ALGOS)} (default ppo)")
     parser.add_argument("--base", default=None,
                         help="base controller name, or 'none' for pure RL (default: the env's first baseline)")

@@ -1,6 +1,10 @@
 """Analytic controllers of the two papers, with SB3's ``predict`` and a plain ``joint_rates`` call."""
 
-from continuum_gym.baselines.occlusion import MinimumNorm, OcclusionLimits, ProjectedGradient
+from continuum_gym.baselines.occlusion import (
+    MinimumNorm,
+    OcclusionLimits,
+    ProjectedGradient,
+)
 from continuum_gym.baselines.registry import (
     CONTROLLERS,
     OCCLUSION_CONTROLLERS,

@@ -5,20 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 
-def as_finite(x, tail: tuple, name: str) -> np.ndarray:
-    """``x`` as float64 with trailing shape ``tail`` and finite entries, else ``ValueError`` naming it."""
-    try:
-        array = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a numeric array of shape (..., {', '.join(map(str, tail))})") from error
-    if array.ndim < len(tail) or (tail and array.shape[-len(tail):] != tail):
-        raise ValueError(f"{name} must have shape (...,{''.join(' ' + str(t) + ',' for t in tail)}); "
-                         f"got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite (no NaN or inf)")
-    return array
-
-
 def broadcast_rows(shape: tuple, *arrays_and_tails):
     """Broadcast each (array, tail) to ``shape + tail`` and flatten the batch: C-contiguous (-1, *tail) rows."""
     return tuple(np.ascontiguousarray(np.broadcast_to(x, shape + tail).reshape((-1,) + tail))

@@ -1,18 +1,27 @@
-"""Controller registry: ``make_controller("projected_gradient", **kwargs)``."""
+"""Controller registry: ``make_controller("projected_gradient", **kwargs)``.
+
+Which controllers an environment offers as residual base is part of its spec
+(``continuum_gym.envs.spec``); here every analytic controller is known by its name.
+"""
 
 from __future__ import annotations
 
-from continuum_gym.baselines.occlusion import MinimumNorm, ProjectedGradient
-from continuum_gym.baselines.view_tracking import DimensionReduced, ResolvedRate
+from continuum_gym.baselines.occlusion import (
+    MinimumNorm,
+    OcclusionController,
+    ProjectedGradient,
+)
+from continuum_gym.baselines.view_tracking import (
+    DimensionReduced,
+    ResolvedRate,
+    ViewTrackingController,
+)
+from continuum_gym.validation import closest
 
-CONTROLLERS = {
-    MinimumNorm.name: MinimumNorm,
-    ProjectedGradient.name: ProjectedGradient,
-    ResolvedRate.name: ResolvedRate,
-    DimensionReduced.name: DimensionReduced,
-}
-OCCLUSION_CONTROLLERS = (MinimumNorm.name, ProjectedGradient.name)
-VIEW_TRACKING_CONTROLLERS = (ResolvedRate.name, DimensionReduced.name)
+CONTROLLERS = {cls.name: cls for cls in (MinimumNorm, ProjectedGradient, ResolvedRate, DimensionReduced)}
+#: Names of the controllers of each paper (derived from their base classes).
+OCCLUSION_CONTROLLERS = tuple(name for name, cls in CONTROLLERS.items() if issubclass(cls, OcclusionController))
+VIEW_TRACKING_CONTROLLERS = tuple(name for name, cls in CONTROLLERS.items() if issubclass(cls, ViewTrackingController))
 
 
 def make_controller(name: str, **kwargs):
@@ -20,5 +29,6 @@ def make_controller(name: str, **kwargs):
     try:
         cls = CONTROLLERS[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown controller {name!r}; valid names: {sorted(CONTROLLERS)}") from None
+        hint = closest(name, CONTROLLERS) if isinstance(name, str) else ""
+        raise ValueError(f"unknown controller {name!r}{hint}; valid names: {sorted(CONTROLLERS)}") from None
     return cls(**kwargs)

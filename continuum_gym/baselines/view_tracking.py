@@ -24,12 +24,17 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from continuum_gym.baselines.base import Controller, as_finite, as_rotation_field, broadcast_rows
-from continuum_gym.robots.endoscope import ContinuumEndoscope, _kinematics_one
-from continuum_gym.robots.rotations import cholesky_solve_inplace, orientation_error
-from continuum_gym.robots.validation import positive
+from continuum_gym.baselines.base import Controller, as_rotation_field, broadcast_rows
+from continuum_gym.robots.endoscope import (
+    ContinuumEndoscope,
+    endoscope_kinematics,
+    make_endoscope_workspace,
+)
+from continuum_gym.robots.linalg import damped_gram_solve
+from continuum_gym.robots.rotations import orientation_error
+from continuum_gym.validation import as_finite, positive
 
-DOF = 6
+DOF = ContinuumEndoscope.dof
 RMRC = 0
 DR = 1
 # Internal length unit of the paper-001 IK: mm (paper-notes §2.7).
@@ -40,7 +45,13 @@ CONVERGED_ORIENTATION = 1e-5
 STALL_MOTION = 1e-9
 STALL_STEPS = 50
 
+#: What the IK kernels read besides the robot: RMRC or DR, the twist caps (m/s, rad/s), the damping of
+#: eq (19) in mm units and the joint limits (6,).
 ViewParams = namedtuple("ViewParams", ["method", "v_lim", "w_lim", "damping", "lower", "upper"])
+#: Work arrays of one IK step: camera pose, target point, Jacobian, kinematics scratch, orientation-error
+#: scratch, capped twist, the Jacobian in mm, the active-column mask, solver scratch, the next configuration.
+ViewScratch = namedtuple("ViewScratch", ["p_cam", "R_ct", "p_ct", "J", "ws", "work33", "e_w", "twist", "Jmm", "mask",
+                                         "A3", "B3", "M6", "C", "q_new", "ones"])
 
 
 @njit(cache=True)
@@ -51,41 +62,34 @@ def wrap_half_open(x):
 
 @njit(cache=True)
 def make_view_scratch():
-    """Work arrays: (p_cam, R_ct, p_ct, J, R1, W1, R2, work33, e_w, twist, Jmm, mask, A3, B3, M6, C, q_new)."""
-    return (np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6)), np.empty((3, 3)), np.empty((3, 3)),
-            np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)), np.empty(6),
-            np.empty((3, 3)), np.empty((3, 6)), np.empty((6, 6)), np.empty((3, 6)), np.empty(6))
+    """Work arrays of ``view_rates_kernel`` (``ViewScratch``)."""
+    return ViewScratch(np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6)), make_endoscope_workspace(),
+                       np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)), np.empty(6), np.empty((3, 3)),
+                       np.empty((3, 6)), np.empty((6, 6)), np.empty((3, 6)), np.empty(6), np.ones(6))
 
 
 @njit(cache=True)
-def view_errors(q, p_tgt, R_tgt, geom, scratch):
+def view_errors(q, p_tgt, R_tgt, robot, scratch):
     """FK + Jacobian into scratch; returns (eps_p (m), eps_R (rad)); e_p in twist[:3], e_w in e_w."""
-    p_cam, R_ct, p_ct, J, R1, W1, R2, work33, e_w, twist = scratch[:10]
-    _kinematics_one(q, geom, p_cam, R_ct, p_ct, J, True, R1, W1, R2)
+    p_ct, e_w, twist = scratch.p_ct, scratch.e_w, scratch.twist
+    endoscope_kinematics(q, robot, scratch.ws, scratch.p_cam, scratch.R_ct, p_ct, scratch.J, True)
     for a in range(3):
         twist[a] = p_tgt[a] - p_ct[a]
     eps_p = math.sqrt(twist[0] ** 2 + twist[1] ** 2 + twist[2] ** 2)
-    orientation_error(R_tgt, R_ct, work33, e_w)
+    orientation_error(R_tgt, scratch.R_ct, scratch.work33, e_w)
     eps_r = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
     return eps_p, eps_r
 
 
 @njit(cache=True)
-def _damped_pinv_rows(A, damping, out, work3):
+def _damped_pinv_rows(A, damping, out, work3, ones):
     """out (6 x 3) = A^T (A A^T + damping I)^-1 for A (3 x 6); undamped if damping == 0 and A A^T invertible."""
-    for a in range(3):
-        for b in range(3):
-            acc = 0.0
-            for k in range(6):
-                acc += A[a, k] * A[b, k]
-            work3[a, b] = acc
-        work3[a, a] += damping
     # Solve (A A^T + damping I) X = A for X (3 x 6); then out = X^T.
     X = np.empty((3, 6))
     for a in range(3):
         for k in range(6):
             X[a, k] = A[a, k]
-    ok = cholesky_solve_inplace(work3, X)
+    ok = damped_gram_solve(A, ones, damping, work3, X)
     for k in range(6):
         for a in range(3):
             out[k, a] = X[a, k] if ok else 0.0
@@ -93,13 +97,13 @@ def _damped_pinv_rows(A, damping, out, work3):
 
 
 @njit(cache=True)
-def view_rates_kernel(q, p_tgt, R_tgt, dt, geom, prm, scratch, qdot):
+def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     """Joint rates (SI) for one step into ``qdot``; returns (eps_p, eps_R, frozen_bits).
 
     RMRC: undamped pinv of the full 6x6 J. DR: paper-notes §2.5 loop with freezing. Both in mm/rad.
     """
-    p_cam, R_ct, p_ct, J, R1, W1, R2, work33, e_w, twist, Jmm, mask, A3, B3, M6, C, q_new = scratch
-    eps_p, eps_r = view_errors(q, p_tgt, R_tgt, geom, scratch)
+    J, e_w, twist, Jmm, mask = scratch.J, scratch.e_w, scratch.twist, scratch.Jmm, scratch.mask
+    eps_p, eps_r = view_errors(q, p_tgt, R_tgt, robot, scratch)
     # Capped twist (paper-notes §2.3 item 5) from SI errors and limits, then expressed in mm/s and rad/s.
     v_gain = min(prm.v_lim, eps_p / dt) / eps_p if eps_p > 0.0 else 0.0
     w_gain = min(prm.w_lim, eps_r / dt) / eps_r if eps_r > 0.0 else 0.0
@@ -127,7 +131,7 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, geom, prm, scratch, qdot):
         for k in range(6):
             mask[k] = 1.0
         for _ in range(DOF + 1):
-            _dr_solution(Jmm, twist, mask, prm.damping, A3, B3, M6, C, qdot)
+            _dr_solution(Jmm, twist, mask, prm.damping, scratch.A3, scratch.M6, scratch.C, scratch.ones, qdot)
             newly = False
             for k in range(6):
                 if mask[k] == 0.0:
@@ -145,10 +149,10 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, geom, prm, scratch, qdot):
 
 
 @njit(cache=True)
-def _dr_solution(Jmm, twist, mask, damping, A3, Jv_pinv, M6, C, qdot):
+def _dr_solution(Jmm, twist, mask, damping, A3, M6, C, ones, qdot):
     """Eq (17) with the damped inverse of eq (19) on the active columns (mask); frozen rates are 0.
 
-    Jv_pinv (here named for its 3 x 6 storage) holds J~v^+ transposed; C holds J~w N.
+    M6 holds N = I - J~v^+ J~v and C holds J~w N.
     """
     Jv = np.empty((3, 6))
     Jw = np.empty((3, 6))
@@ -157,7 +161,7 @@ def _dr_solution(Jmm, twist, mask, damping, A3, Jv_pinv, M6, C, qdot):
             Jv[a, k] = Jmm[a, k] * mask[k]
             Jw[a, k] = Jmm[3 + a, k] * mask[k]
     pv = np.empty((6, 3))
-    _damped_pinv_rows(Jv, damping, pv, A3)
+    _damped_pinv_rows(Jv, damping, pv, A3, ones)
     # first = J~v^+ v
     first = np.empty(6)
     for k in range(6):
@@ -183,7 +187,7 @@ def _dr_solution(Jmm, twist, mask, damping, A3, Jv_pinv, M6, C, qdot):
             acc += Jw[a, k] * first[k]
         r[a] = twist[3 + a] - acc
     pc = np.empty((6, 3))
-    _damped_pinv_rows(C, damping, pc, A3)
+    _damped_pinv_rows(C, damping, pc, A3, ones)
     for k in range(6):
         if mask[k] == 0.0:
             qdot[k] = 0.0
@@ -206,10 +210,10 @@ def integrate_view_step(q, qdot, dt, lower, upper, out):
 
 
 @njit(cache=True)
-def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, geom, prm, record, q_final, steps, status, q_hist):
+def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, robot, prm, record, q_final, steps, status, q_hist):
     """Run each row to convergence, stall or max_steps (paper-notes §2.6). status: 0 max steps, 1 converged, 2 stalled."""
     scratch = make_view_scratch()
-    q_new = scratch[16]
+    q_new = scratch.q_new
     qdot = np.empty(6)
     q = np.empty(6)
     for i in range(Q0.shape[0]):
@@ -221,7 +225,7 @@ def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, geom, prm, record, q_final, st
         status[i] = 0
         n = 0
         while n < max_steps:
-            eps_p, eps_r, _ = view_rates_kernel(q, P_tgt[i], R_tgt[i], dt, geom, prm, scratch, qdot)
+            eps_p, eps_r, _ = view_rates_kernel(q, P_tgt[i], R_tgt[i], dt, robot, prm, scratch, qdot)
             if eps_p * MM_PER_M < CONVERGED_POSITION_MM and eps_r < CONVERGED_ORIENTATION:
                 status[i] = 1
                 break
@@ -301,7 +305,7 @@ class ViewTrackingController(Controller):
         rates = np.empty((n, DOF))
         errors = np.empty((n, 2))
         frozen = np.empty(n, dtype=np.int64)
-        _rates_batch(Q, P, R, dt, self.robot._geom, self.params, rates, errors, frozen)
+        _rates_batch(Q, P, R, dt, self.robot.kernel_args(), self.params, rates, errors, frozen)
         info = {
             "position_error_m": errors[:, 0].reshape(shape),
             "orientation_error_rad": errors[:, 1].reshape(shape),
@@ -325,7 +329,7 @@ class ViewTrackingController(Controller):
         steps = np.empty(n, dtype=np.int64)
         status = np.empty(n, dtype=np.int64)
         history = np.empty((n, int(max_steps) + 1, DOF) if record else (1, 1, DOF))
-        _solve_batch(Q, P, R, dt, int(max_steps), self.robot._geom, self.params, bool(record),
+        _solve_batch(Q, P, R, dt, int(max_steps), self.robot.kernel_args(), self.params, bool(record),
                      q_final, steps, status, history)
         result = {"q": q_final.reshape(shape + (DOF,)), "steps": steps.reshape(shape),
                   "status": status.reshape(shape)}
@@ -341,10 +345,10 @@ class ViewTrackingController(Controller):
 
 
 @njit(cache=True)
-def _rates_batch(Q, P, R, dt, geom, prm, rates, errors, frozen):
+def _rates_batch(Q, P, R, dt, robot, prm, rates, errors, frozen):
     scratch = make_view_scratch()
     for i in range(Q.shape[0]):
-        errors[i, 0], errors[i, 1], frozen[i] = view_rates_kernel(Q[i], P[i], R[i], dt, geom, prm, scratch, rates[i])
+        errors[i, 0], errors[i, 1], frozen[i] = view_rates_kernel(Q[i], P[i], R[i], dt, robot, prm, scratch, rates[i])
 
 
 class ResolvedRate(ViewTrackingController):

@@ -14,12 +14,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from numba import njit
 from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
+from numba import njit
 
-TASK_SPLITS = ("train", "test")
+from continuum_gym.envs.info import info_batch, info_row
+from continuum_gym.validation import integer
 
 
 @njit(cache=True)
@@ -58,28 +59,9 @@ def check_actions(actions, shape, name="action") -> tuple[np.ndarray, np.ndarray
     return rows, clipped
 
 
-def validate_weights(weights, defaults: dict) -> dict:
-    """Merge user reward weights into the defaults; unknown names or negative/non-finite values raise."""
-    merged = dict(defaults)
-    if weights is None:
-        return merged
-    if not isinstance(weights, dict):
-        raise ValueError(f"reward_weights must be a dict of term name -> weight; got {type(weights).__name__}")
-    for key, value in weights.items():
-        if key not in defaults:
-            raise ValueError(f"reward_weights has unknown term {key!r}; valid terms: {sorted(defaults)}")
-        try:
-            value = float(value)
-        except (TypeError, ValueError) as error:
-            raise ValueError(f"reward_weights[{key!r}] must be a number >= 0; got {value!r}") from error
-        if not np.isfinite(value) or value < 0:
-            raise ValueError(f"reward_weights[{key!r}] must be finite and >= 0; got {value!r}")
-        merged[key] = value
-    return merged
-
-
 #: Batches at least this large are stepped on all cores (rows are independent, results identical).
 PARALLEL_MIN_ROWS = 32
+_EXECUTORS: dict = {}
 
 
 def parallel_chunks(num_envs: int) -> int:
@@ -92,29 +74,73 @@ def parallel_chunks(num_envs: int) -> int:
     return min(num_envs, 4 * threads)
 
 
-def choose(value, valid, name):
-    if value not in valid:
-        raise ValueError(f"{name} must be one of {list(valid)}; got {value!r}")
-    return value
+def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int) -> None:
+    """``kernel(*args, start, stop)`` over ``n_chunks`` contiguous row ranges covering [0, num_rows).
+
+    The step kernels release the GIL, so the chunks run on a pool of Python threads (as many as
+    numba's thread count): the caller's OpenMP and torch thread settings are never touched.
+    """
+    if n_chunks <= 1:
+        kernel(*args, 0, num_rows)
+        return
+    import numba
+
+    threads = numba.get_num_threads()
+    executor = _EXECUTORS.get(threads)
+    if executor is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        executor = _EXECUTORS[threads] = ThreadPoolExecutor(max_workers=threads,
+                                                            thread_name_prefix="continuum-gym-step")
+    bounds = [chunk * num_rows // n_chunks for chunk in range(n_chunks + 1)]
+    futures = [executor.submit(kernel, *args, start, stop) for start, stop in zip(bounds[:-1], bounds[1:])]
+    for future in futures:
+        future.result()
 
 
 class BatchedCore:
-    """Interface of a batched core (see ``OcclusionCore``); documented here once."""
+    """Interface of a batched core (see ``OcclusionCore``); documented here once.
 
+    A core holds the state of N robots as arrays (``q``, ``obs``, ``metrics``, ``flags``, ...) and
+    advances all of them with one compiled call. Subclasses set ``spec``, ``config_class``,
+    ``reward_names`` and ``info_fields`` (one definition of ``info`` for one row and for the batch).
+    """
+
+    spec = None
+    config_class: type = None
+    reward_names: tuple = ()
+    info_fields: tuple = ()
     num_envs: int
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
     obs: np.ndarray  # (N, obs_dim) float64
     task_count: int
 
+    def _config(self, config, kwargs):
+        """The validated config: ``config`` as given, or built from the keyword arguments."""
+        if config is None:
+            return self.config_class.from_kwargs(**kwargs)
+        if not isinstance(config, self.config_class):
+            raise ValueError(f"config must be a {self.config_class.__name__}; got {type(config).__name__}")
+        return config.replace(**kwargs) if kwargs else config
+
+    @staticmethod
+    def _num_envs(num_envs) -> int:
+        return integer(num_envs, "num_envs", low=1)
+
+    def info(self) -> dict:
+        """Every ``info`` entry for the whole batch: {name: (N, ...) array}."""
+        return info_batch(self.info_fields, self)
+
+    def info_row(self, row: int) -> dict:
+        """Every ``info`` entry of one row: Python scalars and fresh arrays."""
+        return info_row(self.info_fields, self, row)
+
     def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:  # pragma: no cover - interface
         raise NotImplementedError
 
     def step(self, actions: np.ndarray, active: np.ndarray):  # pragma: no cover - interface
         """Returns (rewards, terminated, truncated) arrays and fills ``self.obs``."""
-        raise NotImplementedError
-
-    def info(self, rows=None) -> dict:  # pragma: no cover - interface
         raise NotImplementedError
 
     def _install_tasks(self, rows, fresh) -> None:
@@ -130,9 +156,6 @@ class BatchedCore:
         self.terms[rows] = 0.0
         self.rewards[rows] = 0.0
 
-    def info_row(self, row: int) -> dict:  # pragma: no cover - interface
-        raise NotImplementedError
-
     def reward_terms(self) -> dict:
         return {key: self.terms[:, k].copy() for k, key in enumerate(self.reward_names)}
 
@@ -141,10 +164,6 @@ class BatchedCore:
 
     def sample_task_id(self, rng: np.random.Generator) -> int:
         return int(rng.integers(0, self.task_count))
-
-
-#: BIT_TABLE[bits] is the bool vector of an 8-bit joint mask (clamped or frozen joints).
-BIT_TABLE = ((np.arange(256)[:, None] >> np.arange(8)) & 1).astype(bool)
 
 
 # ---------------------------------------------------------------------- single env
@@ -192,10 +211,11 @@ class ContinuumEnv(gym.Env):
         info["reward_terms"] = self.core.reward_terms_row(0)
         info["action_clipped"] = clipped
         if self._pixel_occlusion:
-            info["pixel_occlusion"] = self.core.pixel_occlusion(0, self._get_scene())
+            info["pixel_occlusion"] = self.core.pixel_occlusion(0, self.scene())
         return info
 
-    def _get_scene(self):
+    def scene(self):
+        """The pybullet scene that renders this env (built on first use; ``close()`` releases it)."""
         if self._scene is None:
             self._scene = self.core.make_scene()
         return self._scene
@@ -204,7 +224,7 @@ class ContinuumEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
-        return self.core.render_row(0, self._get_scene(), self.camera)
+        return self.core.render_row(0, self.scene(), self.camera)
 
     def close(self):
         if self._scene is not None:

@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 from numba import njit
+
+#: Task instances as arrays, for both environments: a trajectory as a sum of sines (centre, amp, omega,
+#: phase) of the desired tip position (occlusion) or of the da Vinci configuration (view tracking), the
+#: desired tip orientation R_des (occlusion; identity otherwise), the task's duration and the episode's
+#: step limit (both in control steps).
+TaskArrays = namedtuple("TaskArrays", ["centre", "amp", "omega", "phase", "R_des", "duration", "limit"])
 
 
 @njit(cache=True, inline="always")

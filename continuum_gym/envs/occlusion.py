@@ -2,197 +2,180 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from gymnasium import spaces
 
-from continuum_gym.baselines.occlusion import OcclusionLimits
-from continuum_gym.baselines.registry import OCCLUSION_CONTROLLERS, make_controller
+from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
-    BIT_TABLE,
-    TASK_SPLITS,
     BatchedCore,
     ContinuumEnv,
     ContinuumVectorEnv,
-    choose,
     parallel_chunks,
-    validate_weights,
+    run_in_chunks,
 )
+from continuum_gym.envs.common_kernels import trajectory_batch
+from continuum_gym.envs.config import OcclusionConfig
+from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
 from continuum_gym.envs.occlusion_kernel import (
-    ACTION_DIM,
-    OBS_DIM,
+    FLAG_BASE_FROZEN,
+    FLAG_BASE_SATURATED,
+    FLAG_CLAMPED,
+    FLAG_GAMMA_SATURATED,
+    FLAG_GUARDED,
+    FLAG_RATE_SATURATED,
+    FLAG_TERMINATED,
+    FLAG_TRUNCATED,
+    METRIC_ORIENTATION_ERROR,
+    METRIC_TIP_ERROR,
+    METRIC_VIEW_FRACTION,
+    METRIC_VOI,
+    N_FLAGS,
+    N_METRICS,
     OBS_LIMIT,
     REWARD_TERMS,
+    OcclusionOutputs,
+    OcclusionState,
+    OcclusionStepParams,
+    TaskArrays,
+    observation_dim,
     occlusion_observe_batch,
     occlusion_step_batch,
-    occlusion_step_batch_parallel,
 )
+from continuum_gym.envs.spec import OCCLUSION_SPEC
 from continuum_gym.envs.tasks import (
-    OCCLUSION_TASKS,
     VISIBILITY_FRACTION,
     occlusion_task_count,
     occlusion_tasks,
 )
-from continuum_gym.geometry.lens_cone import LENS_MODELS, LensCone
-from continuum_gym.robots.validation import positive
+from continuum_gym.geometry.lens_cone import LensCone
 
-# Visibility is weighted so that leaving 0.7 of the half-angle costs more than any VOI it could save:
-# otherwise occlusion is "solved" by looking away from the tip.
-DEFAULT_WEIGHTS = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0, "action": 0.01}
-RESIDUAL_SPACES = ("nullspace", "joint")
-# A hair inside the 0.7 half-angles of the visibility criterion: the tip still moves within a substep.
-DEFAULT_VISIBILITY_GUARD = 0.69
+#: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
+INFO_FIELDS = (
+    InfoField("voi", column("metrics", METRIC_VOI), float, "Visual Occlusion Index (eq 27) at the new state"),
+    InfoField("tip_error_m", column("metrics", METRIC_TIP_ERROR), float, "tip position error (m)"),
+    InfoField("orientation_error_rad", column("metrics", METRIC_ORIENTATION_ERROR), float,
+              "tip orientation error (rad)"),
+    InfoField("tip_view_fraction", column("metrics", METRIC_VIEW_FRACTION), float,
+              "tip angle from the view axis / cone half-angle"),
+    InfoField("tip_in_view", lambda core: core.metrics[:, METRIC_VIEW_FRACTION] <= VISIBILITY_FRACTION, bool,
+              "tip within 0.7 of the half-angle"),
+    InfoField("gamma", attribute("gamma"), float, "endoscope rotation (rad)"),
+    InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a position limit (dof,)"),
+    InfoField("rate_saturated", column("flags", FLAG_RATE_SATURATED, bool), bool,
+              "joint rates scaled down to the rate limits"),
+    InfoField("gamma_rate_saturated", column("flags", FLAG_GAMMA_SATURATED, bool), bool,
+              "endoscope rate clipped to its limit"),
+    InfoField("base_frozen_joints", bits("flags", FLAG_BASE_FROZEN), None,
+              "joints the baseline froze at a limit during the step (dof,)"),
+    InfoField("base_rate_saturated", column("flags", FLAG_BASE_SATURATED, bool), bool,
+              "the baseline's rates were scaled down"),
+    InfoField("visibility_guarded", column("flags", FLAG_GUARDED, bool), bool,
+              "the visibility guard cut the residual's endoscope rotation"),
+    InfoField("base_command", attribute("base_cmd"), None, "the baseline's command at the new state (dof + 1,)"),
+    InfoField("task_id", lambda core: core.tasks.task_id, int, "task instance"),
+    InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
+)
 
 
 class OcclusionCore(BatchedCore):
     """Batched state and step of the occlusion-avoidance environment (see ``OcclusionAvoidanceEnv``)."""
 
+    spec = OCCLUSION_SPEC
+    config_class = OcclusionConfig
     reward_names = REWARD_TERMS
+    info_fields = INFO_FIELDS
 
-    def __init__(self, num_envs=1, task="hold", task_split="train", base_controller="projected_gradient",
-                 residual_scale=0.3, residual_space="nullspace", reward_weights=None, control_dt=0.01, substeps=10,
-                 max_bend=math.pi / 2, insertion=(0.0, 0.04), bend_rate=3.0, plane_rate=6.0, insertion_rate=0.02,
-                 gamma_rate=3.0, lens_model="literal", max_episode_steps=None,
-                 visibility_guard=DEFAULT_VISIBILITY_GUARD):
-        self.num_envs = int(num_envs)
-        self.task = choose(task, OCCLUSION_TASKS, "task")
-        self.task_split = choose(task_split, TASK_SPLITS, "task_split")
-        if self.task == "circle" and self.task_split == "train":
-            raise ValueError("task='circle' is a fixed evaluation task: use task_split='test' "
-                             "(training draws from 'hold' or 'random')")
-        if base_controller is not None:
-            choose(base_controller, OCCLUSION_CONTROLLERS, "base_controller")
-        self.base_controller = base_controller
-        self.residual_space = choose(residual_space, RESIDUAL_SPACES, "residual_space")
-        self.residual_scale = positive(residual_scale, "residual_scale", "fraction of the rate limits")
-        self.weights = validate_weights(reward_weights, DEFAULT_WEIGHTS)
-        self.control_dt = positive(control_dt, "control_dt", "s")
-        if int(substeps) != substeps or substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1; got {substeps!r}")
-        self.substeps = int(substeps)
-        choose(lens_model, LENS_MODELS, "lens_model")
-        self.limits = OcclusionLimits(max_bend=max_bend, insertion=tuple(insertion), bend_rate=bend_rate,
-                                      plane_rate=plane_rate, insertion_rate=insertion_rate, gamma_rate=gamma_rate)
-        self.cone = LensCone(lens_model=lens_model)
+    def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, **kwargs):
+        self.config = config = self._config(config, kwargs)
+        self.num_envs = self._num_envs(num_envs)
+        self.task, self.task_split = config.task, config.task_split
+        self.base_controller = config.base_controller
+        self.residual_space = config.residual_space
+        self.residual_scale = config.residual_scale
+        self.weights = config.reward_weights
+        self.control_dt, self.substeps = config.control_dt, config.substeps
+        self.limits = config.limits
+        self.visibility_guard = config.visibility_guard
+        self.max_episode_steps = config.max_episode_steps
+        self.cone = LensCone(lens_model=config.lens_model)
         # The baseline always exists inside (for its rate limits and kernels); has_base says if it acts.
-        self.controller = make_controller(base_controller or "projected_gradient", cone=self.cone,
+        self.controller = make_controller(config.base_controller or "projected_gradient", cone=self.cone,
                                           limits=self.limits)
         self.robot = self.controller.robot
-        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
-        if visibility_guard is not None and not (0.0 < visibility_guard < 1.0):
-            raise ValueError(f"visibility_guard must be a fraction of the cone half-angle in (0, 1), or None to turn "
-                             f"the guard off; got {visibility_guard!r}")
-        self.visibility_guard = visibility_guard
+        self.dof = dof = self.robot.dof
+        lower, upper, rate_limit = self.limits.bounds(self.robot.n_segments)
         self.task_count = occlusion_task_count(self.task, self.task_split)
-        self.rate_scale_vec = np.append(self.limits.rate_limit, self.limits.gamma_rate)
-        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (OBS_DIM,), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
+        self.rate_scale_vec = np.append(rate_limit, self.limits.gamma_rate)
+        obs_dim = observation_dim(self.robot.n_segments)
+        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (dof + 1,), np.float32)
         n = self.num_envs
-        self.q = np.zeros((n, 7))
+        self.q = np.zeros((n, dof))
         self.gamma = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
-        self.obs = np.zeros((n, OBS_DIM))
-        self.base_cmd = np.zeros((n, ACTION_DIM))
+        self.obs = np.zeros((n, obs_dim))
+        self.base_cmd = np.zeros((n, dof + 1))
         self.base_info = np.zeros((n, 2), dtype=np.int64)
-        self.metrics = np.zeros((n, 4))
+        self.metrics = np.zeros((n, N_METRICS))
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
+        self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.n_chunks = parallel_chunks(n)
-        self.flags = np.zeros((n, 8), dtype=np.int64)
         self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
                                      self.limits.max_bend, self.limits.insertion)
-        self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
-        lengths, stiffness, segments, fractions, prm, has_base = self._model_args()
-        self._step_args = (
-            self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.R_des,
-            self.tasks.duration, self.limit, self.control_dt, self.substeps, lengths, stiffness, segments, fractions, prm,
-            has_base, self.residual_space == "nullspace", self.residual_scale if has_base else 1.0,
-            self.rate_scale_vec, self.limits.rate_limit, self.limits.gamma_rate, self.limits.lower,
-            self.limits.upper, self.limits.max_bend, self._weights, VISIBILITY_FRACTION,
-            -1.0 if visibility_guard is None else float(visibility_guard), self.base_cmd,
-            self.base_info, self.obs, self.metrics, self.terms, self.rewards, self.flags)
+        has_base = self.base_controller is not None
+        guard = self.visibility_guard
+        self._state = OcclusionState(self.q, self.gamma, self.steps)
+        self._tasks = TaskArrays(self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase,
+                                 self.tasks.R_des, self.tasks.duration, self.limit)
+        self._env = OcclusionStepParams(
+            control_dt=self.control_dt, substeps=self.substeps, has_base=has_base,
+            nullspace=self.residual_space == "nullspace", residual_scale=self.residual_scale if has_base else 1.0,
+            rate_scale_vec=self.rate_scale_vec, rate_limit=rate_limit, gamma_rate_limit=self.limits.gamma_rate,
+            lower=lower, upper=upper, max_bend=self.limits.max_bend,
+            weights=np.array([self.weights[key] for key in REWARD_TERMS]), visibility_fraction=VISIBILITY_FRACTION,
+            visibility_guard=-1.0 if guard is None else float(guard))
+        self._out = OcclusionOutputs(self.base_cmd, self.base_info, self.obs, self.metrics, self.terms, self.rewards,
+                                     self.flags)
+        self._model = (self.robot.kernel_args(), self.controller.params)
 
     # ------------------------------------------------------------------ state
-    def reset_rows(self, rows, task_ids):
+    def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         fresh = occlusion_tasks(self.task, self.task_split, task_ids, self.control_dt, self.limits.max_bend,
                                 self.limits.insertion)
         self._install_tasks(rows, fresh)
         self.gamma[rows] = fresh.start_gamma
-        occlusion_observe_batch(rows, self.q, self.gamma, self.steps, self.tasks.centre, self.tasks.amp,
-                                self.tasks.omega, self.tasks.phase, self.tasks.R_des, self.tasks.duration,
-                                self.control_dt, self.substeps, *self._model_args(), self.limits.lower,
-                                self.limits.upper, self.limits.max_bend, self.rate_scale_vec, self.base_cmd,
-                                self.base_info, self.obs, self.metrics)
+        self.observe_rows(rows)
 
-    def _model_args(self):
-        c = self.controller
-        return (c.robot._lengths_array, c.robot.stiffness, c._segments, c._fractions, c.params,
-                self.base_controller is not None)
+    def observe_rows(self, rows) -> None:
+        """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
+        occlusion_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
+                                self._out)
 
-    def step(self, actions, active):
-        if self.n_chunks > 1:
-            occlusion_step_batch_parallel(self.q, self.gamma, self.steps, actions, active, *self._step_args,
-                                          self.n_chunks)
-        else:
-            occlusion_step_batch(self.q, self.gamma, self.steps, actions, active, *self._step_args)
-        return self.rewards, self.flags[:, 3] != 0, self.flags[:, 4] != 0
+    def step(self, actions: np.ndarray, active: np.ndarray):
+        run_in_chunks(occlusion_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env, self._out),
+                      self.num_envs, self.n_chunks)
+        return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
-    # ------------------------------------------------------------------ info
-    def info_row(self, row):
-        m = self.metrics[row]
-        f = self.flags[row]
-        return {
-            "voi": float(m[0]),
-            "tip_error_m": float(m[1]),
-            "orientation_error_rad": float(m[2]),
-            "tip_view_fraction": float(m[3]),
-            "tip_in_view": bool(m[3] <= VISIBILITY_FRACTION),
-            "gamma": float(self.gamma[row]),
-            "clamped_joints": BIT_TABLE[f[0] & 127, :7].copy(),
-            "rate_saturated": bool(f[1]),
-            "gamma_rate_saturated": bool(f[2]),
-            "base_frozen_joints": BIT_TABLE[f[5] & 127, :7].copy(),
-            "base_rate_saturated": bool(f[6]),
-            "visibility_guarded": bool(f[7]),
-            "base_command": self.base_cmd[row].copy(),
-            "task_id": int(self.tasks.task_id[row]),
-            "elapsed_steps": int(self.steps[row]),
-        }
+    def step_values(self) -> dict:
+        """Per-step values the evaluation reduces to episode metrics (``OCCLUSION_SPEC.episode_metrics``)."""
+        return {"voi": self.metrics[:, METRIC_VOI],
+                "in_view": (self.metrics[:, METRIC_VIEW_FRACTION] <= VISIBILITY_FRACTION) * 1.0,
+                "tip_error": self.metrics[:, METRIC_TIP_ERROR],
+                "orientation_error": self.metrics[:, METRIC_ORIENTATION_ERROR],
+                "guarded": (self.flags[:, FLAG_GUARDED] != 0) * 1.0}
 
-    def info(self):
-        bits = np.arange(7)
-        return {
-            "voi": self.metrics[:, 0].copy(),
-            "tip_error_m": self.metrics[:, 1].copy(),
-            "orientation_error_rad": self.metrics[:, 2].copy(),
-            "tip_view_fraction": self.metrics[:, 3].copy(),
-            "tip_in_view": self.metrics[:, 3] <= VISIBILITY_FRACTION,
-            "gamma": self.gamma.copy(),
-            "clamped_joints": ((self.flags[:, 0:1] >> bits) & 1).astype(bool),
-            "rate_saturated": self.flags[:, 1].astype(bool),
-            "gamma_rate_saturated": self.flags[:, 2].astype(bool),
-            "base_frozen_joints": ((self.flags[:, 5:6] >> bits) & 1).astype(bool),
-            "base_rate_saturated": self.flags[:, 6].astype(bool),
-            "visibility_guarded": self.flags[:, 7].astype(bool),
-            "base_command": self.base_cmd.copy(),
-            "task_id": self.tasks.task_id.copy(),
-            "elapsed_steps": self.steps.copy(),
-        }
-
-    def controller_observation(self, row=0):
+    def controller_observation(self, row: int = 0) -> dict:
         """The dict observation an analytic controller's ``predict`` reads, for one row."""
-        from continuum_gym.envs.common_kernels import trajectory_batch
-
         t = np.array([self.steps[row] * self.control_dt])
         p = np.empty((1, 1, 3))
         v = np.empty((1, 1, 3))
         trajectory_batch(self.tasks.centre[row:row + 1], self.tasks.amp[row:row + 1], self.tasks.omega[row:row + 1],
                          self.tasks.phase[row:row + 1], t, p, v)
-        return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p[0, 0], "R_des": self.tasks.R_des[row],
-                "v_des": v[0, 0], "dt": self.control_dt / self.substeps}
+        return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p[0, 0],
+                "R_des": self.tasks.R_des[row], "v_des": v[0, 0], "dt": self.control_dt / self.substeps}
 
     # ------------------------------------------------------------------ rendering (pybullet, optional)
     def make_scene(self):
@@ -200,11 +183,12 @@ class OcclusionCore(BatchedCore):
 
         return OcclusionScene(robot=self.robot, cone=self.cone)
 
-    def render_row(self, row, scene, camera):
+    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
+        """RGB image (size, size, 3) of one row's state through ``camera``."""
         scene.update(self.q[row], self.gamma[row])
-        return scene.render(camera=camera)
+        return scene.render(camera=camera, width=size, height=size)
 
-    def pixel_occlusion(self, row, scene):
+    def pixel_occlusion(self, row: int, scene) -> float:
         from continuum_gym.render import pixel_occlusion
 
         return pixel_occlusion(self.robot, self.q[row], self.gamma[row], cone=self.cone, scene=scene)
@@ -277,24 +261,23 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     ``terminated`` when the tip is more than 10 mm from its desired position (the tip is lost);
     ``truncated`` at the task's duration (hold 1.5 s, random 5 s, circle 10 s; mixed: its instance's).
 
+    ## Info
+{info}
+    - ``reward_terms``: each weighted reward term (the reward is their sum); ``action_clipped``: the
+      action was clipped to [-1, 1].
+
     ## Arguments
-    - ``task``: ``"hold"`` (default), ``"random"`` (smooth random tip trajectories, <= 12 mm), ``"mixed"``
-      (even task ids hold, odd ids random), ``"circle"`` (the paper's, test split only).
-    - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
-    - ``base_controller``: ``"projected_gradient"`` (default), ``"minimum_norm"`` or ``None``.
-    - ``residual_scale`` (0.3), ``residual_space`` (``"nullspace"``), ``reward_weights``.
-    - ``visibility_guard``: fraction of the cone half-angle in (0, 1) (default 0.69) or ``None`` (off).
-    - ``control_dt`` (0.01 s) and ``substeps`` (10): the paper's 1 ms loop under a 10 ms policy.
-    - Limits the paper lacks (assumptions): ``max_bend`` (pi/2, two-sided |pi/2 - theta_j| <= max_bend),
-      ``insertion`` ((0, 0.04) m), ``bend_rate`` (3 rad/s), ``plane_rate`` (6 rad/s), ``insertion_rate``
-      (0.02 m/s), ``gamma_rate`` (3 rad/s); gamma is wrapped to (-pi, pi].
-    - ``lens_model``: ``"literal"`` (default) or ``"physical"`` (paper-notes §1.3 item 7).
-    - ``render_mode``: ``None`` or ``"rgb_array"``; ``camera``: ``"external"`` or ``"endoscope"``;
-      ``pixel_occlusion``: add the pixel-occlusion fraction to ``info`` (slow).
+    Keyword arguments of ``gym.make`` (or one ``config=OcclusionConfig(...)``), validated in one place
+    (``continuum_gym.envs.config``); physics limits the paper lacks are assumptions (paper-notes §5).
+    Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"`` or
+    ``"endoscope"``), ``pixel_occlusion`` (add the pixel-occlusion fraction to ``info``; slow).
+
+{arguments}
 
     ## Version History
     - v0: initial release.
-    """
+    """.replace("{info}", fields_table(INFO_FIELDS)).replace(
+    "{arguments}", "\n".join("    " + line for line in OcclusionConfig.arguments_table().splitlines()))
 
 
 class OcclusionAvoidanceEnv(ContinuumEnv):

@@ -4,24 +4,18 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
-# Safety bounds only: each task truncates itself at its own duration.
-_ENVS = {
-    "OcclusionAvoidance-v0": ("continuum_gym.envs.occlusion:OcclusionAvoidanceEnv",
-                              "continuum_gym.envs.occlusion:OcclusionAvoidanceVectorEnv", 1000),
-    "ViewTracking-v0": ("continuum_gym.envs.view_tracking:ViewTrackingEnv",
-                        "continuum_gym.envs.view_tracking:ViewTrackingVectorEnv", 1000),
-}
+from continuum_gym.envs.spec import ENV_SPECS
 
-ENV_IDS = []
+ENV_IDS: list[str] = []
 
 
 def register_envs() -> list:
-    """Register every id once (importing continuum_gym twice is harmless)."""
-    for name, (entry_point, vector_entry_point, max_steps) in _ENVS.items():
-        env_id = f"ContinuumGym/{name}"
+    """Register every id of ``ENV_SPECS`` once (importing continuum_gym twice is harmless)."""
+    for env_id, spec in ENV_SPECS.items():
         if env_id not in registry:
-            register(id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point,
-                     max_episode_steps=max_steps)
+            # A safety bound only: each task truncates itself at its own duration.
+            register(id=env_id, entry_point=spec.entry_point, vector_entry_point=spec.vector_entry_point,
+                     max_episode_steps=spec.max_episode_steps)
         if env_id not in ENV_IDS:
             ENV_IDS.append(env_id)
     return ENV_IDS

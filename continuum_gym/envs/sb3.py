@@ -13,21 +13,12 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from continuum_gym.envs.batched import check_actions, row_generators
-
-_CORES = {
-    "ContinuumGym/OcclusionAvoidance-v0": ("continuum_gym.envs.occlusion", "OcclusionCore"),
-    "ContinuumGym/ViewTracking-v0": ("continuum_gym.envs.view_tracking", "ViewTrackingCore"),
-}
+from continuum_gym.envs.spec import get_spec, registered_kwargs
 
 
-def core_class(env_id: str):
-    import importlib
-
-    try:
-        module, name = _CORES[env_id]
-    except KeyError:
-        raise ValueError(f"unknown env id {env_id!r}; valid ids: {sorted(_CORES)}") from None
-    return getattr(importlib.import_module(module), name)
+def core_class(env_id: str) -> type:
+    """The batched core class behind ``env_id`` (any id registered to the library's entry points)."""
+    return get_spec(env_id).core_class()
 
 
 class ContinuumSB3VecEnv(VecEnv):
@@ -42,8 +33,8 @@ class ContinuumSB3VecEnv(VecEnv):
 
     def __init__(self, env_id: str, num_envs: int, seed=None, **kwargs):
         self.env_id = env_id
-        self.env_kwargs = dict(kwargs)
-        self.core = core_class(env_id)(num_envs=num_envs, **kwargs)
+        self.env_kwargs = {**registered_kwargs(env_id), **kwargs}
+        self.core = core_class(env_id)(num_envs=num_envs, **self.env_kwargs)
         self.render_mode = None
         super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
         self._rngs = row_generators(seed, num_envs)

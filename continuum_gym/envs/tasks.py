@@ -28,7 +28,6 @@ from continuum_gym.geometry.occlusion import visual_occlusion_index
 from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
 
 N_TERMS = 3
-TASK_SPLITS = ("train", "test")
 SPLIT_CODE = {"train": 0, "test": 1}
 HOLD_POOL_SIZE = {"train": 512, "test": 128}
 #: Hold starts: VOI at gamma = 0 in this window (paper-like, paper-notes §1.5 widened as the issue asks).
@@ -70,7 +69,6 @@ def _empty_batch(n, dof, dim):
 
 
 # ---------------------------------------------------------------------- occlusion avoidance
-OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
 OCCLUSION_DURATION_S = {"hold": 1.5, "circle": 10.0, "random": 5.0}
 
 
@@ -167,11 +165,7 @@ def occlusion_task_count(task: str, split: str) -> int:
 
 
 # ---------------------------------------------------------------------- view tracking
-VIEW_TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
 VIEW_DURATION_S = {"random": 6.0, "static": 10.0, "pan_tilt": 10.0, "case1": 10.0, "case2": 10.0, "coverage": 10.0}
-#: Paper ranges of the da Vinci (Table II): L_dV [0, 0.1] m, yaw/pitch [-pi/3, pi/3], roll [-pi, pi].
-DAVINCI_LOWER = np.array([0.0, -math.pi / 3, -math.pi / 3, -math.pi])
-DAVINCI_UPPER = np.array([0.1, math.pi / 3, math.pi / 3, math.pi])
 
 
 def view_tasks(task: str, split: str, task_ids, control_dt: float, grid: int = 21):

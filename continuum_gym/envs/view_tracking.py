@@ -7,89 +7,94 @@ import math
 import numpy as np
 from gymnasium import spaces
 
-from continuum_gym.baselines.registry import VIEW_TRACKING_CONTROLLERS, make_controller
+from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
-    BIT_TABLE,
-    TASK_SPLITS,
     BatchedCore,
     ContinuumEnv,
     ContinuumVectorEnv,
-    choose,
     parallel_chunks,
-    validate_weights,
+    run_in_chunks,
 )
-from continuum_gym.envs.tasks import DAVINCI_LOWER, DAVINCI_UPPER, VIEW_TASKS, view_task_count, view_tasks
+from continuum_gym.envs.common_kernels import TaskArrays, trajectory_batch
+from continuum_gym.envs.config import ViewTrackingConfig
+from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
+from continuum_gym.envs.spec import VIEW_SPEC
+from continuum_gym.envs.tasks import view_task_count, view_tasks
 from continuum_gym.envs.view_kernel import (
     ACTION_DIM,
+    FLAG_CLAMPED,
+    FLAG_RATE_SATURATED,
+    FLAG_TERMINATED,
+    FLAG_TRUNCATED,
+    METRIC_OR,
+    METRIC_ORIENTATION_ERROR,
+    METRIC_POSITION_ERROR,
+    N_FLAGS,
+    N_METRICS,
     OBS_DIM,
-    TARGET_OBS_DIM,
     OBS_LIMIT,
+    OVERLAP_BONUS_THRESHOLD,
     REWARD_TERMS,
+    TARGET_OBS_DIM,
     TARGET_SHIFT_SCALE,
+    ViewOutputs,
+    ViewState,
+    ViewStepParams,
     view_observe_batch,
     view_step_batch,
-    view_step_batch_parallel,
 )
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import DaVinciEndoscope
-from continuum_gym.robots.validation import positive
 
-# overlap_bonus rewards the coverage criterion itself (OR > 0.8); off by default, the paper scores OR.
-DEFAULT_WEIGHTS = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01, "overlap_bonus": 0.0}
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
 ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, math.pi])
-# "joint": the action is added to the baseline's joint rates (6 joints, 6-D task: no null space to project
-# into); "target": the action moves the target the baseline tracks (see TARGET_SHIFT_SCALE).
-RESIDUAL_SPACES = ("joint", "target")
+
+#: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
+INFO_FIELDS = (
+    InfoField("overlap_ratio", column("metrics", METRIC_OR), float,
+              "exact overlap ratio of the two view frustums at the new state"),
+    InfoField("position_error_m", column("metrics", METRIC_POSITION_ERROR), float,
+              "distance of the target point from the da Vinci's (m)"),
+    InfoField("orientation_error_rad", column("metrics", METRIC_ORIENTATION_ERROR), float,
+              "orientation error of the camera frame (rad)"),
+    InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a limit (6,)"),
+    InfoField("rate_saturated", column("flags", FLAG_RATE_SATURATED, bool), bool,
+              "joint rates scaled down to ``rate_limits``"),
+    InfoField("base_command", attribute("base_cmd"), None, "the baseline's joint rates at the new state (6,)"),
+    InfoField("task_id", lambda core: core.tasks.task_id, int, "task instance"),
+    InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
+)
 
 
 class ViewTrackingCore(BatchedCore):
     """Batched state and step of the view-tracking environment (see ``ViewTrackingEnv``)."""
 
+    spec = VIEW_SPEC
+    config_class = ViewTrackingConfig
     reward_names = REWARD_TERMS
+    info_fields = INFO_FIELDS
+    dof = ACTION_DIM
 
-    def __init__(self, num_envs=1, task="random", task_split="train", base_controller="dimension_reduced",
-                 residual_scale=0.3, reward_weights=None, control_dt=0.01, substeps=1, rate_limits=None, grid=21,
-                 max_episode_steps=None, residual_space="joint", max_bend=None, lens_model=None, observe_target=False):
-        self.num_envs = int(num_envs)
-        self.task = choose(task, VIEW_TASKS, "task")
-        self.task_split = choose(task_split, TASK_SPLITS, "task_split")
-        if self.task in ("case1", "case2", "coverage") and self.task_split == "train":
-            raise ValueError(f"task={self.task!r} is a fixed evaluation task of the paper: use task_split='test' "
-                             "(training draws from 'random', 'static' or 'pan_tilt')")
-        if base_controller is not None:
-            choose(base_controller, VIEW_TRACKING_CONTROLLERS, "base_controller")
-        self.base_controller = base_controller
-        self.residual_space = choose(residual_space, RESIDUAL_SPACES, "residual_space")
-        if self.residual_space == "target" and base_controller is None:
-            raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
-        for name, value in (("max_bend", max_bend), ("lens_model", lens_model)):
-            if value is not None:
-                raise ValueError(f"{name} applies to OcclusionAvoidance only; ViewTracking uses the paper's limits")
-        self.residual_scale = positive(residual_scale, "residual_scale", "fraction of the action scale")
-        self.weights = validate_weights(reward_weights, DEFAULT_WEIGHTS)
-        self.control_dt = positive(control_dt, "control_dt", "s")
-        if substeps != 1:
-            raise ValueError("substeps must be 1 for ViewTracking: the paper's IK step is the control step")
+    def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, **kwargs):
+        self.config = config = self._config(config, kwargs)
+        self.num_envs = self._num_envs(num_envs)
+        self.task, self.task_split = config.task, config.task_split
+        self.base_controller = config.base_controller
+        self.residual_space = config.residual_space
+        self.residual_scale = config.residual_scale
+        self.weights = config.reward_weights
+        self.control_dt = config.control_dt
         self.substeps = 1
-        if int(grid) != grid or grid < 2:
-            raise ValueError(f"grid must be an integer >= 2 points per axis; got {grid!r}")
-        self.grid = int(grid)
-        self.controller = make_controller(base_controller or "dimension_reduced")
+        self.grid = config.grid
+        self.controller = make_controller(config.base_controller or "dimension_reduced")
         self.robot = self.controller.robot
         self.davinci = DaVinciEndoscope()
         self.frustum = Frustum()
-        if rate_limits is None:
-            self.rate_limits = np.full(ACTION_DIM, np.inf)
-        else:
-            self.rate_limits = np.asarray(rate_limits, dtype=float)
-            if self.rate_limits.shape != (ACTION_DIM,) or np.any(~(self.rate_limits > 0)):
-                raise ValueError("rate_limits must be 6 positive joint-rate limits (m/s for L0, rad/s) or None")
-        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.rate_limits = np.full(ACTION_DIM, np.inf) if config.rate_limits is None else \
+            np.array(config.rate_limits, dtype=float)
+        self.max_episode_steps = config.max_episode_steps
         self.task_count = view_task_count(self.task, self.grid)
-        if not isinstance(observe_target, (bool, np.bool_)):
-            raise ValueError(f"observe_target must be True or False; got {observe_target!r}")
-        self.observe_target = bool(observe_target)
+        self.observe_target = config.observe_target
         obs_dim = OBS_DIM + (TARGET_OBS_DIM if self.observe_target else 0)
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
@@ -98,87 +103,58 @@ class ViewTrackingCore(BatchedCore):
         self.steps = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, obs_dim))
         self.base_cmd = np.zeros((n, ACTION_DIM))
-        self.metrics = np.zeros((n, 3))
+        self.metrics = np.zeros((n, N_METRICS))
         self.terms = np.zeros((n, len(REWARD_TERMS)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.n_chunks = parallel_chunks(n)
-        self.flags = np.zeros((n, 4), dtype=np.int64)
+        self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.tasks = view_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt, self.grid)
-        self._weights = np.array([self.weights[key] for key in REWARD_TERMS])
         has_base = self.base_controller is not None
-        g = self._geometry_args()
-        self._step_args = (
-            self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase, self.tasks.duration,
-            self.limit, self.control_dt, self.robot._geom, self.controller.params, has_base,
-            self.residual_scale if has_base else 1.0, self.residual_space == "target", TARGET_SHIFT_SCALE, ACTION_SCALE,
-            self.rate_limits, *g[:4], *g[5:], self._weights, self.base_cmd, self.obs, self.metrics, self.terms,
-            self.rewards, self.flags)
+        self._state = ViewState(self.q, self.steps)
+        self._tasks = TaskArrays(self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase,
+                                 self.tasks.R_des, self.tasks.duration, self.limit)
+        self._env = ViewStepParams(
+            control_dt=self.control_dt, has_base=has_base, residual_scale=self.residual_scale if has_base else 1.0,
+            target_space=self.residual_space == "target", target_scale=TARGET_SHIFT_SCALE, action_scale=ACTION_SCALE,
+            rate_limit=self.rate_limits, weights=np.array([self.weights[key] for key in REWARD_TERMS]))
+        self._out = ViewOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
+        self._model = (self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(),
+                       self.frustum.kernel_args())
 
-    def _geometry_args(self):
-        f = self.frustum
-        return (self.davinci.alpha, self.davinci.Le, DAVINCI_LOWER, DAVINCI_UPPER, ACTION_SCALE, f.tan_half, f.near,
-                f.far)
-
-    def reset_rows(self, rows, task_ids):
+    def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         fresh = view_tasks(self.task, self.task_split, task_ids, self.control_dt, self.grid)
         self._install_tasks(rows, fresh)
         self.observe_rows(rows)
 
-    def observe_rows(self, rows):
+    def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
-        view_observe_batch(np.asarray(rows, dtype=np.int64), self.q, self.steps, self.tasks.centre, self.tasks.amp,
-                           self.tasks.omega, self.tasks.phase, self.tasks.duration, self.control_dt, self.robot._geom,
-                           self.controller.params, self.base_controller is not None, *self._geometry_args(),
-                           self.base_cmd, self.obs, self.metrics)
+        view_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
+                           self._out)
 
-    def step(self, actions, active):
-        if self.n_chunks > 1:
-            view_step_batch_parallel(self.q, self.steps, actions, active, *self._step_args, self.n_chunks)
-        else:
-            view_step_batch(self.q, self.steps, actions, active, *self._step_args)
-        return self.rewards, self.flags[:, 2] != 0, self.flags[:, 3] != 0
+    def step(self, actions: np.ndarray, active: np.ndarray):
+        run_in_chunks(view_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env, self._out),
+                      self.num_envs, self.n_chunks)
+        return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
-    def info(self):
-        bits = np.arange(6)
-        return {
-            "overlap_ratio": self.metrics[:, 0].copy(),
-            "position_error_m": self.metrics[:, 1].copy(),
-            "orientation_error_rad": self.metrics[:, 2].copy(),
-            "clamped_joints": ((self.flags[:, 0:1] >> bits) & 1).astype(bool),
-            "rate_saturated": self.flags[:, 1].astype(bool),
-            "base_command": self.base_cmd.copy(),
-            "task_id": self.tasks.task_id.copy(),
-            "elapsed_steps": self.steps.copy(),
-        }
+    def step_values(self) -> dict:
+        """Per-step values the evaluation reduces to episode metrics (``VIEW_SPEC.episode_metrics``)."""
+        ratio = self.metrics[:, METRIC_OR]
+        return {"or": ratio, "or_above": (ratio > OVERLAP_BONUS_THRESHOLD) * 1.0,
+                "position_error": self.metrics[:, METRIC_POSITION_ERROR]}
 
-    def info_row(self, row):
-        m = self.metrics[row]
-        f = self.flags[row]
-        return {
-            "overlap_ratio": float(m[0]),
-            "position_error_m": float(m[1]),
-            "orientation_error_rad": float(m[2]),
-            "clamped_joints": BIT_TABLE[f[0] & 63, :6].copy(),
-            "rate_saturated": bool(f[1]),
-            "base_command": self.base_cmd[row].copy(),
-            "task_id": int(self.tasks.task_id[row]),
-            "elapsed_steps": int(self.steps[row]),
-        }
-
-    def davinci_configuration(self, row=0):
-        """q_davinci [L_dV, yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
-        from continuum_gym.envs.common_kernels import trajectory_batch
-
+    def davinci_configuration(self, row: int = 0) -> np.ndarray:
+        """q_davinci [L_dV (m), yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
         t = np.array([self.steps[row] * self.control_dt])
         x = np.empty((1, 1, 4))
         v = np.empty((1, 1, 4))
         trajectory_batch(self.tasks.centre[row:row + 1], self.tasks.amp[row:row + 1], self.tasks.omega[row:row + 1],
                          self.tasks.phase[row:row + 1], t, x, v)
-        return np.clip(x[0, 0], DAVINCI_LOWER, DAVINCI_UPPER)
+        lower, upper = self.davinci.joint_limits
+        return np.clip(x[0, 0], lower, upper)
 
-    def controller_observation(self, row=0):
+    def controller_observation(self, row: int = 0) -> dict:
         p, R = self.davinci.target_pose(self.davinci_configuration(row))
         return {"q": self.q[row].copy(), "p_target": p, "R_target": R, "dt": self.control_dt}
 
@@ -187,11 +163,12 @@ class ViewTrackingCore(BatchedCore):
 
         return ViewTrackingScene(endoscope=self.robot, davinci=self.davinci, frustum=self.frustum)
 
-    def render_row(self, row, scene, camera):
+    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
+        """RGB image (size, size, 3) of one row's state through ``camera``."""
         scene.update(self.q[row], self.davinci_configuration(row))
-        return scene.render(camera=camera)
+        return scene.render(camera=camera, width=size, height=size)
 
-    def pixel_occlusion(self, row, scene):
+    def pixel_occlusion(self, row: int, scene) -> float:
         raise ValueError("pixel_occlusion applies to OcclusionAvoidance only")
 
 
@@ -253,27 +230,25 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     ``truncated`` at the task's duration (random 6 s; static, pan_tilt, case studies and coverage 10 s, the
     paper's T_max); ``terminated`` only if the state becomes non-finite.
 
+    ## Info
+{info}
+    - ``reward_terms``: each weighted reward term (the reward is their sum); ``action_clipped``: the
+      action was clipped to [-1, 1].
+
     ## Arguments
-    - ``task``: ``"random"`` (default; smooth random yaw/pitch/roll/insertion trajectories of the da Vinci
-      within the paper's ranges), ``"static"`` (random fixed views), ``"pan_tilt"`` (random fixed views with
-      the coverage map's insertion and zero roll: its distribution, off its grid), and the paper's fixed
-      evaluation tasks
-      ``"case1"``, ``"case2"``, ``"coverage"`` (test split only; ``grid`` points per axis, task id = grid index,
-      yaw-major).
-    - ``task_split``: ``"train"`` or ``"test"``, disjoint task instances.
-    - ``base_controller``: ``"dimension_reduced"`` (default), ``"resolved_rate"`` or ``None``.
-    - ``observe_target`` (False): append the da Vinci configuration that defines the target (the commanded
-      view, which a surgeon's console knows); the pose errors alone define it only through the kinematics.
-    - ``residual_scale`` (0.3), ``residual_space`` (``"joint"`` or ``"target"``), ``reward_weights``,
-      ``control_dt`` (0.01 s),
-      ``substeps`` (1), ``rate_limits`` (None: the paper has none; 6 values in m/s, rad/s to add them).
-    - Joint limits of the paper (Table II): L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4],
-      theta2 in [0, pi/2]; deltas wrapped to [-pi, pi). Clamping is reported in ``info["clamped_joints"]``.
-    - ``render_mode``: ``None`` or ``"rgb_array"``; ``camera``: ``"external"``, ``"endoscope"`` or ``"davinci"``.
+    Keyword arguments of ``gym.make`` (or one ``config=ViewTrackingConfig(...)``), validated in one place
+    (``continuum_gym.envs.config``). The coverage task's id is the grid index (yaw-major). Joint limits of
+    the paper (Table II): L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4], theta2 in
+    [0, pi/2]; deltas wrapped to [-pi, pi); clamping is reported in ``info["clamped_joints"]``.
+    Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"``,
+    ``"endoscope"`` or ``"davinci"``).
+
+{arguments}
 
     ## Version History
     - v0: initial release.
-    """
+    """.replace("{info}", fields_table(INFO_FIELDS)).replace(
+    "{arguments}", "\n".join("    " + line for line in ViewTrackingConfig.arguments_table().splitlines()))
 
 
 class ViewTrackingEnv(ContinuumEnv):

@@ -7,10 +7,25 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.baselines import DimensionReduced, MinimumNorm, ProjectedGradient, ResolvedRate
-from continuum_gym.baselines.scenarios import CASE_STUDIES, CASE_STUDY_START, HOLD_ITERATIONS, CircleTask
+from continuum_gym.baselines import (
+    DimensionReduced,
+    MinimumNorm,
+    ProjectedGradient,
+    ResolvedRate,
+)
+from continuum_gym.baselines.scenarios import (
+    CASE_STUDIES,
+    CASE_STUDY_START,
+    HOLD_ITERATIONS,
+    CircleTask,
+)
 from continuum_gym.geometry import overlap_ratio, visual_occlusion_index
-from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope, MultiBackboneRobot, rotation_vector
+from continuum_gym.robots import (
+    ContinuumEndoscope,
+    DaVinciEndoscope,
+    MultiBackboneRobot,
+    rotation_vector,
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -4,49 +4,42 @@ Every method runs in the same batched environment core through SB3's ``predict``
 residual environment with a zero residual (which equals the baseline exactly), a residual policy is
 its SB3 model in that environment, ``pure_rl`` runs with ``base_controller=None``. All methods see the
 same test-split task instances. Statistics: mean and IQM with 95 % stratified-bootstrap CIs (rliable)
-over seeds x episodes.
+over seeds x episodes. What is evaluated, and how, comes from each environment's spec
+(``continuum_gym.envs.spec``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
-from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
-from continuum_gym.evaluation.statistics import summarize
+from continuum_gym.envs.spec import (
+    ENV_SPECS,
+    OCCLUSION_SPEC,
+    VIEW_SPEC,
+    EnvSpec,
+    get_spec,
+)
 
-OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
-VIEW = "ContinuumGym/ViewTracking-v0"
+OCCLUSION = OCCLUSION_SPEC.env_id
+VIEW = VIEW_SPEC.env_id
 POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
 OPTIMUM_CACHE = Path(__file__).resolve().parent / "data" / "optimum_cache.json"
-BASELINES = {OCCLUSION: ("minimum_norm", "projected_gradient"), VIEW: ("resolved_rate", "dimension_reduced")}
-# Env keywords that define how a policy's action acts: taken from its training config. Task keywords are not:
-# every method runs on the same test tasks.
-POLICY_ENV_KEYS = ("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target")
-HEADLINE_BASE = {OCCLUSION: "projected_gradient", VIEW: "dimension_reduced"}
-# Task sets: (task name, number of instances or None for the --episodes default).
-TASK_SETS = {OCCLUSION: (("hold", None), ("random", None), ("circle", 1)),
-             VIEW: (("static", None), ("random", None), ("case1", 1), ("case2", 1))}
-METRICS = {OCCLUSION: ("mean_voi", "tip_in_view_fraction", "mean_tip_error_m", "mean_orientation_error_rad"),
-           VIEW: ("mean_or", "or_above_0.8_fraction", "mean_position_error_m", "coverage_percent")}
-# Per-task diagnostics shown beside the headline metrics (Markdown only): how often the visibility guard cut
-# a residual's endoscope rotation.
-TASK_DIAGNOSTICS = {OCCLUSION: ("visibility_guarded_fraction",), VIEW: ()}
-HIGHER_IS_BETTER = {"mean_voi": False, "tip_in_view_fraction": True, "mean_tip_error_m": False,
-                    "mean_orientation_error_rad": False, "mean_or": True, "or_above_0.8_fraction": True,
-                    "mean_position_error_m": False, "coverage_percent": True, "headroom_closed": True}
+#: headroom_closed, computed for learned methods, is better when higher.
+HEADROOM = "headroom_closed"
 
 
 # ---------------------------------------------------------------------- methods
 def discover_policies(directory) -> dict:
     """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``."""
-    found = {}
+    import yaml
+
+    found: dict = {}
     directory = Path(directory)
     if not directory.exists():
         raise FileNotFoundError(f"--policies: no directory {directory}")
@@ -62,6 +55,8 @@ def discover_policies(directory) -> dict:
 
 
 def load_policy(run: Path):
+    """(SB3 model, its run's config dict) of a run directory."""
+    import yaml
     from stable_baselines3 import PPO, SAC, TD3
 
     config = yaml.safe_load((run / "config.yml").read_text())
@@ -69,77 +64,93 @@ def load_policy(run: Path):
     return cls.load(run / "model.zip", device="cpu"), config
 
 
-def method_runs(env_id, policies):
+def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
+    """The env keywords of a run's config that define how its policy acts (``spec.policy_keys``).
+
+    Runs write their full env config (``env_config``); older runs only their keyword arguments
+    (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
+    """
+    source = config.get("env_config") or config.get("env_kwargs") or {}
+    if config.get("env_config"):
+        source = spec.config_class.from_dict(source).as_kwargs()
+    return {key: value for key, value in source.items() if key in spec.policy_keys}
+
+
+def method_runs(env_id: str, policies: dict) -> list:
     """[(method, [(policy, env_kwargs)])]: baselines first, then learned methods (one entry per seed)."""
+    spec = get_spec(env_id)
     out = []
-    for base in BASELINES[env_id]:
+    for base in spec.baselines:
         out.append((base, [(None, {"base_controller": base})]))
     for method, runs in sorted(policies.get(env_id, {}).items()):
         entries = []
         for run in runs:
             model, config = load_policy(run)
-            kwargs = {k: v for k, v in config.get("env_kwargs", {}).items() if k in POLICY_ENV_KEYS}
-            entries.append((model, kwargs))
+            entries.append((model, policy_env_kwargs(spec, config)))
         out.append((method, entries))
     return out
 
 
 # ---------------------------------------------------------------------- evaluation
-def evaluate_env(env_id, policies, episodes, grid, progress=True) -> dict:
+def evaluate_env(env_id: str, policies: dict, episodes: int, grid: int, progress: bool = True) -> dict:
     """Per method: per task set, scores (seeds x episodes) of each metric, plus traces for figures."""
     from tqdm.auto import tqdm
 
-    results = {}
-    methods = method_runs(env_id, policies)
+    from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
+
+    spec = get_spec(env_id)
+    results: dict = {}
     work = []
-    for method, entries in methods:
+    for method, entries in method_runs(env_id, policies):
         for seed_index, (model, kwargs) in enumerate(entries):
-            for task, count in TASK_SETS[env_id]:
-                work.append((method, seed_index, model, kwargs, task, count or episodes))
-            if env_id == VIEW:
-                work.append((method, seed_index, model, kwargs, "coverage", grid * grid))
-    bar = tqdm(work, desc=env_id.split("/")[-1], disable=not progress)
-    for method, seed_index, model, kwargs, task, count in bar:
-        bar.set_postfix_str(f"{method} {task}")
-        env_kwargs = dict(kwargs, task=task, task_split="test")
-        if task == "coverage":
+            for task_set in spec.task_sets:
+                count = grid * grid if task_set.grid else (task_set.episodes or episodes)
+                work.append((method, model, kwargs, task_set, count))
+    bar = tqdm(work, desc=spec.short_name, disable=not progress)
+    for method, model, kwargs, task_set, count in bar:
+        bar.set_postfix_str(f"{method} {task_set.task}")
+        env_kwargs = dict(kwargs, task=task_set.task, task_split="test")
+        if task_set.grid:
             env_kwargs["grid"] = grid
         core = make_core(env_id, count, **env_kwargs)
         policy = model if model is not None else ZeroResidual(core.single_action_space.shape[0])
-        ids = np.arange(count)
-        traces = task in ("circle", "case1", "case2")
-        result = run_episodes(core, policy, ids, record=traces)
-        entry = results.setdefault(method, {}).setdefault(task, {"scores": {}, "traces": []})
+        traces = task_set.task == spec.trace_task
+        result = run_episodes(core, policy, np.arange(count), record=traces)
+        entry = results.setdefault(method, {}).setdefault(task_set.task, {"scores": {}, "traces": [],
+                                                                          "grid": task_set.grid})
         for key, value in result.items():
-            if key.startswith("trace_"):
-                continue
-            entry["scores"].setdefault(key, []).append(np.asarray(value))
+            if not key.startswith("trace_"):
+                entry["scores"].setdefault(key, []).append(np.asarray(value))
         if traces:
             entry["traces"].append({k: v[:, 0] for k, v in result.items() if k.startswith("trace_")})
     return results
 
 
-def coverage_scores(task_result) -> np.ndarray:
-    """(seeds, grid points) of 100 * [final OR > 0.8]: its mean is the coverage percentage."""
-    return np.stack(task_result["scores"]["final_or"]) > 0.8
+def grid_scores(task_result: dict, metric) -> np.ndarray:
+    """(seeds, grid points) of [grid metric > threshold]: its mean x 100 is e.g. the coverage percentage."""
+    return np.stack(task_result["scores"][metric.grid_metric]) > metric.threshold
 
 
-def aggregate(env_id, results, optimum=None) -> dict:
+def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int | None = None) -> dict:
     """<method> -> <metric> -> {mean, iqm, ci_low, ci_high, ...}, over the env's test tasks."""
+    from continuum_gym.evaluation.statistics import summarize
+
+    spec = get_spec(env_id)
     table = {}
     for method, tasks in results.items():
         row = {}
-        for metric in METRICS[env_id]:
-            if metric == "coverage_percent":
-                if "coverage" in tasks:
-                    row[metric] = summarize(100.0 * coverage_scores(tasks["coverage"]))
+        for metric in spec.metrics:
+            if metric.grid_metric:
+                grid_tasks = [t for t in tasks.values() if t["grid"]]
+                if grid_tasks:
+                    row[metric.name] = summarize(100.0 * grid_scores(grid_tasks[0], metric))
                 continue
-            scores = [np.stack(t["scores"][metric]) for name, t in tasks.items() if name != "coverage"]
-            row[metric] = summarize(_concat_tasks(scores))
+            scores = [np.stack(t["scores"][metric.name]) for t in tasks.values() if not t["grid"]]
+            row[metric.name] = summarize(_concat_tasks(scores))
         table[method] = row
     if optimum:
-        table.update(optimum_rows(env_id, results, optimum))
-    add_headroom(env_id, table, results)
+        table.update(reference_rows(spec, results, optimum, grid))
+    add_headroom(spec, table, results)
     return table
 
 
@@ -150,162 +161,99 @@ def _concat_tasks(score_list):
                            for s in score_list], axis=1)
 
 
-def optimum_rows(env_id, results, optimum) -> dict:
-    rows = {}
-    if env_id == VIEW and "coverage" in optimum:
-        cov = optimum["coverage"]
-        for name, key in (("offline_optimum", "optimum_or"), ("bounded_least_squares", "bounded_least_squares_or")):
-            if key in cov:
-                ratios = np.asarray(cov[key], dtype=float)[None]
-                rows[name] = {"coverage_percent": summarize(100.0 * (ratios > 0.8)),
-                              "final_or": summarize(ratios)}
-    if env_id == OCCLUSION and "hold_test" in optimum:
-        n = len(np.stack(next(iter(results.values()))["hold"]["scores"]["mean_voi"])[0])
-        voi = np.asarray(optimum["hold_test"]["optimum_voi"], dtype=float)
-        if len(voi) >= n:
-            # The optimum holds each start's best configuration and gamma for the whole episode.
-            rows["offline_optimum"] = {"mean_voi": summarize(voi[:n][None]),
-                                       "note": "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"}
+def reference_rows(spec: EnvSpec, results: dict, optimum: dict, grid: int | None) -> dict:
+    """Rows from the offline-optimum cache (``spec.references``) that match this evaluation's tasks."""
+    from continuum_gym.evaluation.statistics import summarize
+
+    rows: dict = {}
+    for ref in spec.references:
+        cached = optimum.get(ref.cache_key)
+        if not cached or ref.values not in cached:
+            continue
+        values = np.asarray(cached[ref.values], dtype=float)
+        if ref.kind == "coverage":
+            metric = spec.metric(ref.metric)
+            if grid is not None and cached.get("grid") != grid:
+                continue
+            row = {ref.metric: summarize(100.0 * (values[None] > metric.threshold)),
+                   metric.grid_metric: summarize(values[None])}
+        else:
+            n = len(np.stack(next(iter(results.values()))[ref.task]["scores"][ref.metric])[0])
+            if len(values) < n:
+                continue
+            # The optimum holds each task's best configuration for the whole episode.
+            row = {ref.metric: summarize(values[:n][None]), "note": ref.note}
+        rows.setdefault(ref.method, {}).update(row)
     return rows
 
 
-def add_headroom(env_id, table, results) -> None:
-    """headroom_closed = (method - base) / (optimum - base) for learned methods.
+def method_value(spec: EnvSpec, results: dict, method: str, task: str, metric_name: str) -> float:
+    """Mean of a metric over a method's seeds and the episodes of one task set."""
+    metric = spec.metric(metric_name)
+    if metric.grid_metric:
+        return float(np.mean(grid_scores(results[method][task], metric)) * 100)
+    return float(np.mean(np.stack(results[method][task]["scores"][metric_name])))
 
-    OcclusionAvoidance: mean VOI on the hold test tasks (where the optimum is known); ViewTracking:
-    coverage percentage on the grid.
-    """
-    base = HEADLINE_BASE[env_id]
+
+def add_headroom(spec: EnvSpec, table: dict, results: dict) -> None:
+    """headroom_closed = (method - base) / (optimum - base) for learned methods, on ``spec.headroom``."""
+    task, metric = spec.headroom
+    base = spec.headline_baseline
     if "offline_optimum" not in table or base not in results:
         return
-    if env_id == OCCLUSION:
-        if "mean_voi" not in table["offline_optimum"] or "hold" not in results[base]:
-            return
-        optimum = table["offline_optimum"]["mean_voi"]["mean"]
-
-        def value(method):
-            return float(np.mean(np.stack(results[method]["hold"]["scores"]["mean_voi"])))
-    else:
-        if "coverage_percent" not in table["offline_optimum"] or "coverage" not in results[base]:
-            return
-        optimum = table["offline_optimum"]["coverage_percent"]["mean"]
-
-        def value(method):
-            return float(np.mean(coverage_scores(results[method]["coverage"])) * 100)
-
-    reference = value(base)
+    if metric not in table["offline_optimum"] or task not in results[base]:
+        return
+    optimum = table["offline_optimum"][metric]["mean"]
+    reference = method_value(spec, results, base, task, metric)
     if abs(optimum - reference) < 1e-12:
         return
+    where = f"{task} grid, {metric}" if results[base][task]["grid"] else f"{task} tasks, {metric}"
     for method in results:
         if method.startswith(("residual_", "pure_rl")):
-            closed = (value(method) - reference) / (optimum - reference)
-            table[method]["headroom_closed"] = {"mean": closed, "iqm": closed, "ci_low": closed, "ci_high": closed,
-                                                "on": "hold tasks, mean_voi" if env_id == OCCLUSION else
-                                                "coverage grid, coverage_percent"}
+            closed = (method_value(spec, results, method, task, metric) - reference) / (optimum - reference)
+            table[method][HEADROOM] = {"mean": closed, "iqm": closed, "ci_low": closed, "ci_high": closed, "on": where}
 
 
 # ---------------------------------------------------------------------- report
-def markdown(env_id, table, results) -> str:
-    metrics = [m for m in METRICS[env_id]] + ["headroom_closed"]
-    lines = [f"### {env_id}", "", "| method | " + " | ".join(metrics) + " |",
-             "|---|" + "---|" * len(metrics)]
+def markdown(env_id: str, table: dict, results: dict) -> str:
+    spec = get_spec(env_id)
+    metrics = [m.name for m in spec.metrics] + [HEADROOM]
+    lines = [f"### {env_id}", "", "| method | " + " | ".join(metrics) + " |", "|---|" + "---|" * len(metrics)]
     for method, row in table.items():
         cells = []
-        for metric in metrics:
-            s = row.get(metric)
+        for name in metrics:
+            s = row.get(name)
             if not isinstance(s, dict) or "mean" not in s:
                 cells.append("-")
-            elif metric == "headroom_closed":
+            elif name == HEADROOM:
                 cells.append(f"{s['mean']:.2f}")
             else:
-                cells.append(f"{_fmt(metric, s['mean'])} [{_fmt(metric, s['ci_low'])}, {_fmt(metric, s['ci_high'])}] "
-                             f"(IQM {_fmt(metric, s['iqm'])})")
+                cells.append(f"{fmt(spec, name, s['mean'])} [{fmt(spec, name, s['ci_low'])}, "
+                             f"{fmt(spec, name, s['ci_high'])}] (IQM {fmt(spec, name, s['iqm'])})")
         lines.append(f"| {method} | " + " | ".join(cells) + " |")
-    columns = METRICS[env_id][:3] + TASK_DIAGNOSTICS[env_id]
+    columns = [m.name for m in spec.metrics if not m.grid_metric][:3] + list(spec.diagnostics)
     lines += ["", "Per task set (mean over seeds and episodes):", "",
               "| method | task | " + " | ".join(columns) + " |", "|---|---|" + "---|" * len(columns)]
     for method, tasks in results.items():
         for task, t in tasks.items():
-            if task == "coverage":
+            if t["grid"]:
                 continue
-            values = [_fmt(m, float(np.mean(np.stack(t["scores"][m])))) for m in columns]
+            values = [fmt(spec, m, float(np.mean(np.stack(t["scores"][m])))) for m in columns]
             lines.append(f"| {method} | {task} | " + " | ".join(values) + " |")
     return "\n".join(lines) + "\n"
 
 
-def _fmt(metric, value):
-    if metric.endswith("_m"):
-        return f"{value * 1e3:.3f} mm"
-    if metric == "coverage_percent":
+def fmt(spec: EnvSpec, name: str, value: float) -> str:
+    """A metric value as the tables show it (lengths in mm, percentages with one decimal)."""
+    try:
+        metric = spec.metric(name)
+    except KeyError:
+        metric = None
+    if metric is not None and metric.display_unit:
+        return f"{value * metric.display_scale:.3f} {metric.display_unit}"
+    if metric is not None and metric.unit == "%":
         return f"{value:.1f} %"
     return f"{value:.3g}" if abs(value) < 0.01 else f"{value:.3f}"
-
-
-def draw(env_id, results, table, policies, out: Path) -> list:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    paths = []
-    short = env_id.split("/")[-1].split("-")[0]
-    metric = "mean_voi" if env_id == OCCLUSION else "mean_or"
-    # Distributions of the headline metric per method (all seeds x non-coverage episodes).
-    fig, ax = plt.subplots(figsize=(8, 4))
-    labels, data = [], []
-    for method, tasks in results.items():
-        labels.append(method)
-        data.append(np.concatenate([np.stack(t["scores"][metric]).ravel() for k, t in tasks.items() if k != "coverage"]))
-    ax.boxplot(data, showmeans=True)
-    ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20)
-    ax.set(ylabel=metric, title=f"{short}: {metric} per episode (held-out tasks)")
-    fig.tight_layout()
-    paths.append(out / f"{short}_distribution.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
-    # Time traces of the fixed paper tasks.
-    trace_task = "circle" if env_id == OCCLUSION else "case1"
-    key = "trace_voi" if env_id == OCCLUSION else "trace_or"
-    fig, ax = plt.subplots(figsize=(8, 4))
-    for method, tasks in results.items():
-        if trace_task in tasks and tasks[trace_task]["traces"]:
-            trace = tasks[trace_task]["traces"][0][key]
-            ax.plot(np.arange(len(trace)) * 0.01, trace, label=method)
-    ax.set(xlabel="time (s)", ylabel=key[6:].upper(), title=f"{short}: {trace_task}, first seed")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    paths.append(out / f"{short}_{trace_task}_trace.png")
-    fig.savefig(paths[-1], dpi=110)
-    plt.close(fig)
-    # OR maps side by side.
-    if env_id == VIEW:
-        maps = [(m, np.stack(t["coverage"]["scores"]["final_or"]).mean(axis=0)) for m, t in results.items()
-                if "coverage" in t]
-        grid = int(round(np.sqrt(maps[0][1].size)))
-        fig, axes = plt.subplots(1, len(maps), figsize=(4.2 * len(maps), 4), constrained_layout=True)
-        for ax, (method, ratios) in zip(np.atleast_1d(axes), maps):
-            image = ax.imshow(ratios.reshape(grid, grid).T, origin="lower", extent=[-60, 60, -60, 60], vmin=0, vmax=1)
-            ax.set(title=f"{method}\n{np.mean(ratios > 0.8) * 100:.1f} % > 0.8", xlabel="yaw (deg)",
-                   ylabel="pitch (deg)")
-        fig.colorbar(image, ax=axes, label="final OR")
-        paths.append(out / f"{short}_coverage_maps.png")
-        fig.savefig(paths[-1], dpi=100)
-        plt.close(fig)
-    # Learning curves of the learned policies.
-    curves = [(method, run) for method, runs in policies.get(env_id, {}).items() for run in runs
-              if (run / "evaluations.npz").exists()]
-    if curves:
-        fig, ax = plt.subplots(figsize=(8, 4))
-        for method, run in curves:
-            data = np.load(run / "evaluations.npz")
-            ax.plot(data["timesteps"], data[metric], label=f"{method} ({run.name.split('_')[-1]})")
-        ax.set(xlabel="environment steps", ylabel=f"{metric} (held-out)", title=f"{short}: learning curves")
-        ax.legend(fontsize=7)
-        fig.tight_layout()
-        paths.append(out / f"{short}_learning_curves.png")
-        fig.savefig(paths[-1], dpi=110)
-        plt.close(fig)
-    return paths
 
 
 # ---------------------------------------------------------------------- CLI
@@ -315,22 +263,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grid", type=int, default=21, help="coverage grid points per axis (default 21)")
     parser.add_argument("--out", default="results/evaluate", help="directory for tables and figures")
     parser.add_argument("--json", default=None, help="write <env> -> <method> -> <metric> -> stats JSON here")
-    parser.add_argument("--env", nargs="+", default=[OCCLUSION, VIEW], help="environment ids to evaluate")
+    parser.add_argument("--env", nargs="+", default=list(ENV_SPECS), help="environment ids to evaluate")
     parser.add_argument("--no-progress", action="store_true")
 
 
-def load_optimum():
+def load_optimum() -> dict | None:
+    """The shipped offline-optimum cache, or None."""
     if OPTIMUM_CACHE.exists():
         return json.loads(OPTIMUM_CACHE.read_text())
     return None
 
 
 def run(args) -> int:
-    import sys
-
     for env_id in args.env:
-        if env_id not in BASELINES:
-            print(f"continuum-gym evaluate: unknown env {env_id!r}; valid: {sorted(BASELINES)}", file=sys.stderr)
+        try:
+            get_spec(env_id)
+        except ValueError as error:
+            print(f"continuum-gym evaluate: {error}", file=sys.stderr)
             return 2
     if args.episodes < 1 or args.grid < 2:
         print("continuum-gym evaluate: --episodes must be >= 1 and --grid >= 2", file=sys.stderr)
@@ -340,6 +289,9 @@ def run(args) -> int:
     except FileNotFoundError as error:
         print(f"continuum-gym evaluate: {error}", file=sys.stderr)
         return 2
+    from continuum_gym.evaluation.figures import draw
+    from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
+
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     optimum = load_optimum()
@@ -347,9 +299,7 @@ def run(args) -> int:
     summary, report = {}, []
     for env_id in args.env:
         results = evaluate_env(env_id, policies, args.episodes, args.grid, progress=not args.no_progress)
-        usable = optimum if (env_id == OCCLUSION or args.grid == (optimum or {}).get("coverage", {}).get("grid")) \
-            else None
-        table = aggregate(env_id, results, usable)
+        table = aggregate(env_id, results, optimum, args.grid)
         summary[env_id] = table
         report.append(markdown(env_id, table, results))
         for path in draw(env_id, results, table, policies, out):

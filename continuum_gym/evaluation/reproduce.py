@@ -17,7 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.baselines import DimensionReduced, MinimumNorm, ProjectedGradient, ResolvedRate
+from continuum_gym.baselines import (
+    DimensionReduced,
+    MinimumNorm,
+    ProjectedGradient,
+    ResolvedRate,
+)
 from continuum_gym.baselines.scenarios import (
     CASE_STUDIES,
     CASE_STUDY_START,
@@ -32,7 +37,11 @@ from continuum_gym.baselines.scenarios import (
 )
 from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
 from continuum_gym.geometry import overlap_ratio, visual_occlusion_index
-from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope, MultiBackboneRobot
+from continuum_gym.robots import (
+    ContinuumEndoscope,
+    DaVinciEndoscope,
+    MultiBackboneRobot,
+)
 
 SWEEP_SEED = 0
 SWEEP_STARTS = 60

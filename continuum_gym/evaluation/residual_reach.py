@@ -15,10 +15,13 @@ from scipy.optimize import minimize
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD, coverage_grid
 from continuum_gym.baselines.view_tracking import make_view_scratch, view_rates_kernel
-from continuum_gym.evaluation.optimum import _or_one, view_tracking_optimum
+from continuum_gym.evaluation.optimum.view import (
+    overlap_of_configuration,
+    view_tracking_optimum,
+)
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import DaVinciEndoscope
-from continuum_gym.robots.validation import positive
+from continuum_gym.validation import positive
 
 #: The residual env's control step (s): the baseline's rate depends on it through its capped twist.
 CONTROL_DT = 0.01
@@ -51,13 +54,13 @@ class _EffortKernel:
     def __init__(self, controller, residual_scale, control_dt=CONTROL_DT):
         from continuum_gym.envs.view_tracking import ACTION_SCALE
 
-        self.geom, self.params = controller.robot._geom, controller.params
+        self.robot, self.params = controller.robot.kernel_args(), controller.params
         self.reach = residual_scale * ACTION_SCALE
         self.control_dt = control_dt
         self.scratch, self.rates = make_view_scratch(), np.empty(6)
 
     def __call__(self, q, p_target, R_target):
-        view_rates_kernel(np.ascontiguousarray(q, dtype=float), p_target, R_target, self.control_dt, self.geom,
+        view_rates_kernel(np.ascontiguousarray(q, dtype=float), p_target, R_target, self.control_dt, self.robot,
                           self.params, self.scratch, self.rates)
         return float(np.max(np.abs(self.rates) / self.reach))
 
@@ -73,14 +76,14 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
     frustum, davinci = Frustum(), DaVinciEndoscope()
     p_a, R_a = davinci.forward_kinematics(q_davinci)
     p_t, R_t = davinci.target_pose(q_davinci)
-    geom = controller.robot._geom
+    robot = controller.robot.kernel_args()
     lower, upper = controller.robot.joint_limits
     rng = np.random.default_rng(seed)
     q_out = np.array(q_star, dtype=float)
 
     def overlap(q, k):
-        return _or_one(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], geom, frustum.tan_half, frustum.near,
-                       frustum.far)
+        return overlap_of_configuration(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], robot, frustum.tan_half,
+                                        frustum.near, frustum.far)
 
     effort_kernel = _EffortKernel(controller, positive(residual_scale, "residual_scale", "fraction of the action scale"))
 

@@ -1,6 +1,10 @@
 """View geometry: the angled-lens cone (force field, VOI) and view frustums (overlap ratio)."""
 
-from continuum_gym.geometry.force_field import ForceField, potential_gradient, repulsive_force
+from continuum_gym.geometry.force_field import (
+    ForceField,
+    potential_gradient,
+    repulsive_force,
+)
 from continuum_gym.geometry.frustum import FACE_VERTICES, Frustum
 from continuum_gym.geometry.lens_cone import (
     LENS_MODELS,

@@ -9,20 +9,30 @@ grad Pi = grad E - sum_i Jv_i^T f_i (eq 12, paper-notes §1.3 item 5).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
 from continuum_gym.geometry.lens_cone import (
-    _points_and_gamma,
     cone_distance_slant,
     lens_to_world_direction,
+    points_and_gamma,
     resolve_cone,
     to_lens,
 )
-from continuum_gym.robots.mbcr import DOF, PAPER_PSPS, _as_q, all_finite, make_workspace, points_kernel
-from continuum_gym.robots.validation import positive
+from continuum_gym.robots.mbcr import (
+    PAPER_PSPS,
+    MultiBackboneRobot,
+    all_finite,
+    make_workspace,
+    points_kernel,
+)
+from continuum_gym.validation import as_finite, positive
+
+#: What the force kernels read: d0 (m), r_star (m), f_star (N) and the exponents p, q of eq (18).
+FieldKernelArgs = namedtuple("FieldKernelArgs", ["d0", "r_star", "f_star", "p", "q"])
 
 # Below these the force is singular (vertex) or has no direction (axis): paper-notes §1.3 item 8.
 VERTEX_EPS = 1e-9
@@ -54,9 +64,9 @@ class ForceField:
         positive(self.p, "p", "-")
         positive(self.q, "q", "-")
 
-    @property
-    def kernel_args(self) -> tuple:
-        return (self.d0, self.r_star, self.f_star, self.p, self.q)
+    def kernel_args(self) -> FieldKernelArgs:
+        """(d0, r_star, f_star, p, q): the bundle the force kernels read."""
+        return FieldKernelArgs(float(self.d0), float(self.r_star), float(self.f_star), float(self.p), float(self.q))
 
 
 DEFAULT_FIELD = ForceField()
@@ -71,91 +81,94 @@ def resolve_field(field) -> ForceField:
 
 
 @njit(cache=True)
-def force_kernel(px, py, pz, gamma, d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp):
-    """World force (N) on one point (m): eq (18)-(19) with paper-notes §1.3 item 8. Returns (fx, fy, fz)."""
-    xl, yl, zl = to_lens(px, py, pz, gamma, d_o, alpha, model)
-    d, r, rho = cone_distance_slant(xl, yl, zl, beta)
-    if d > d0 or r < VERTEX_EPS or rho < AXIS_EPS:
+def force_kernel(px, py, pz, gamma, cone, field):
+    """World force (N) on one point (m): eq (18)-(19) with paper-notes §1.3 item 8. Returns (fx, fy, fz).
+
+    ``cone`` and ``field`` are the ``kernel_args()`` of a ``LensCone`` and a ``ForceField``.
+    """
+    xl, yl, zl = to_lens(px, py, pz, gamma, cone.d_o, cone.alpha, cone.model)
+    d, r, rho = cone_distance_slant(xl, yl, zl, cone.beta)
+    if d > field.d0 or r < VERTEX_EPS or rho < AXIS_EPS:
         return 0.0, 0.0, 0.0
-    magnitude = f_star * (r_star / r) ** q_exp * (1.0 - d / d0) ** (2.0 * p_exp)
-    cb = math.cos(beta)
-    sb = math.sin(beta)
-    fx, fy, fz = lens_to_world_direction(xl * cb / rho, yl * cb / rho, -sb, gamma, alpha)
+    magnitude = field.f_star * (field.r_star / r) ** field.q * (1.0 - d / field.d0) ** (2.0 * field.p)
+    cb = math.cos(cone.beta)
+    sb = math.sin(cone.beta)
+    fx, fy, fz = lens_to_world_direction(xl * cb / rho, yl * cb / rho, -sb, gamma, cone.alpha)
     return magnitude * fx, magnitude * fy, magnitude * fz
 
 
 @njit(cache=True)
-def potential_gradient_kernel(q, lengths, stiffness, ws, segments, fractions, P, JV, gamma,
-                              d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp, grad):
-    """grad Pi (eq 12) for one q into ``grad`` (7,); P, JV are (m, 3), (m, 3, 7) scratch."""
-    points_kernel(q, lengths, ws, segments, fractions, P, JV)
-    for k in range(7):
+def potential_gradient_kernel(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
+    """grad Pi (eq 12) for one q into ``grad`` (dof,); P, JV are (m, 3), (m, 3, dof) scratch."""
+    points_kernel(q, robot, ws, segments, fractions, P, JV)
+    dof = q.shape[0]
+    for k in range(dof):
         grad[k] = 0.0
-    for j in range(3):
-        grad[2 * j] = -stiffness[j] * (0.5 * math.pi - q[2 * j])
+    for j in range(robot.lengths.shape[0]):
+        grad[2 * j] = -robot.stiffness[j] * (0.5 * math.pi - q[2 * j])
     for i in range(segments.shape[0]):
-        fx, fy, fz = force_kernel(P[i, 0], P[i, 1], P[i, 2], gamma, d_o, alpha, beta, model,
-                                  d0, r_star, f_star, p_exp, q_exp)
+        fx, fy, fz = force_kernel(P[i, 0], P[i, 1], P[i, 2], gamma, cone, field)
         if fx == 0.0 and fy == 0.0 and fz == 0.0:
             continue
-        for k in range(7):
+        for k in range(dof):
             grad[k] -= JV[i, 0, k] * fx + JV[i, 1, k] * fy + JV[i, 2, k] * fz
 
 
 @njit(cache=True)
-def _potential_gradient_batch(qs, G, lengths, stiffness, segments, fractions,
-                              d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp, out):
+def _potential_gradient_batch(qs, G, robot, segments, fractions, cone, field, out):
     if not all_finite(qs):
         return False
-    ws = make_workspace()
+    ws = make_workspace(robot.lengths.shape[0])
     m = segments.shape[0]
     P = np.empty((m, 3))
-    JV = np.empty((m, 3, 7))
+    JV = np.empty((m, 3, qs.shape[1]))
     for i in range(qs.shape[0]):
-        potential_gradient_kernel(qs[i], lengths, stiffness, ws, segments, fractions, P, JV, G[i],
-                                  d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp, out[i])
+        potential_gradient_kernel(qs[i], robot, ws, segments, fractions, P, JV, G[i], cone, field, out[i])
     return True
 
 
 @njit(cache=True)
-def _force_batch(P, G, d_o, alpha, beta, model, d0, r_star, f_star, p_exp, q_exp, out):
+def _force_batch(P, G, cone, field, out):
     for i in range(P.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = force_kernel(P[i, 0], P[i, 1], P[i, 2], G[i], d_o, alpha, beta,
-                                                       model, d0, r_star, f_star, p_exp, q_exp)
+        out[i, 0], out[i, 1], out[i, 2] = force_kernel(P[i, 0], P[i, 1], P[i, 2], G[i], cone, field)
 
 
-def repulsive_force(points, gamma, cone=None, field=None):
+def repulsive_force(points, gamma, cone=None, field=None) -> np.ndarray:
     """Force (N) of eq (18) on world points (..., 3) in m, in {w}; gamma (rad) broadcasts."""
     cone = resolve_cone(cone)
     field = resolve_field(field)
-    P, G, shape = _points_and_gamma(points, gamma)
+    P, G, shape = points_and_gamma(points, gamma)
     out = np.empty((P.shape[0], 3))
-    _force_batch(P, G, cone.d_o, cone.alpha, cone.beta, cone.model_code, *field.kernel_args, out)
+    _force_batch(P, G, cone.kernel_args(), field.kernel_args(), out)
     return out.reshape(shape + (3,))
 
 
-def potential_gradient(robot, q, gamma, cone=None, field=None, psps=PAPER_PSPS):
-    """grad Pi = grad E - sum_i Jv_i^T f_i (eq 12) over the points subject to potential, shape (..., 7).
+def potential_gradient(robot: MultiBackboneRobot, q, gamma, cone=None, field=None, psps=PAPER_PSPS) -> np.ndarray:
+    """grad Pi = grad E - sum_i Jv_i^T f_i (eq 12) over the points subject to potential, shape (..., dof).
 
     Args:
         robot: a ``MultiBackboneRobot``.
-        q: configuration(s) (..., 7).
+        q: configuration(s) (..., dof): rad, and m for q_ins.
         gamma: endoscope rotation (rad), broadcasts with q[..., 0].
         cone, field: ``LensCone`` and ``ForceField`` (None: the paper's).
         psps: (segment, arc fraction) pairs; default the paper's 10 (paper-notes §1.5).
     """
+    if not isinstance(robot, MultiBackboneRobot):
+        raise ValueError(f"robot must be a MultiBackboneRobot; got {type(robot).__name__}")
     cone = resolve_cone(cone)
     field = resolve_field(field)
-    q = _as_q(q)
-    gamma = np.asarray(gamma, dtype=np.float64)
-    if not np.all(np.isfinite(gamma)):
-        raise ValueError(f"gamma must be finite (rad); got {gamma}")
-    shape = np.broadcast_shapes(q.shape[:-1], gamma.shape)
-    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (DOF,)).reshape(-1, DOF))
+    q = robot.as_configuration(q)
+    gamma = as_finite(gamma, (), "gamma")
+    try:
+        shape = np.broadcast_shapes(q.shape[:-1], gamma.shape)
+    except ValueError:
+        raise ValueError(f"gamma of shape {gamma.shape} does not broadcast with q of shape {q.shape}") from None
+    dof = robot.dof
+    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (dof,)).reshape(-1, dof))
     G = np.ascontiguousarray(np.broadcast_to(gamma, shape).reshape(-1))
-    segments, fractions = robot._point_spec(psps)
-    out = np.empty((Q.shape[0], DOF))
-    if not _potential_gradient_batch(Q, G, robot._lengths_array, robot.stiffness, segments, fractions,
-                                     *cone.kernel_args, *field.kernel_args, out):
+    segments, fractions = robot.point_spec(psps)
+    out = np.empty((Q.shape[0], dof))
+    if not _potential_gradient_batch(Q, G, robot.kernel_args(), segments, fractions, cone.kernel_args(),
+                                     field.kernel_args(), out):
         raise ValueError(f"q must be finite (no NaN or inf); got {q}")
-    return out.reshape(shape + (DOF,))
+    return out.reshape(shape + (dof,))

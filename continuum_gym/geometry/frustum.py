@@ -20,11 +20,21 @@ Index conventions (shared with ``continuum_gym.geometry.overlap``):
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 
-from continuum_gym.robots.validation import angle_in_open_interval, as_rotations, as_vectors, positive
+from continuum_gym.validation import (
+    angle_in_open_interval,
+    as_rotations,
+    as_vectors,
+    integer,
+    positive,
+)
+
+#: What the overlap kernels read of a frustum: tan of the half-angle, near and far distances (m).
+FrustumKernelArgs = namedtuple("FrustumKernelArgs", ["tan_half", "near", "far"])
 
 #: Vertex indices of the 6 faces (near, far, +x, −x, +y, −y), counter-clockwise about the outward normal.
 FACE_VERTICES = np.array(
@@ -67,6 +77,14 @@ class Frustum:
         object.__setattr__(self, "near", near)
         object.__setattr__(self, "far", far)
         object.__setattr__(self, "_tan_half", math.tan(0.5 * full_angle))
+
+    def kernel_args(self) -> FrustumKernelArgs:
+        """(tan_half, near (m), far (m)): the bundle the overlap kernels read."""
+        return FrustumKernelArgs(self._tan_half, self.near, self.far)
+
+    def to_dict(self) -> dict:
+        """The constructor arguments as plain YAML/JSON values (rad, m)."""
+        return {"full_angle": self.full_angle, "near": self.near, "far": self.far}
 
     @property
     def half_angle(self) -> float:
@@ -138,8 +156,7 @@ class Frustum:
         paper-notes §2.4: z = (near³ + u (far³ − near³))^(1/3) with u ~ U(0, 1), then x, y ~ U(−t z, t z).
         ``rng`` is a ``numpy.random.Generator`` (or a seed passed to ``numpy.random.default_rng``).
         """
-        if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n must be an integer >= 1; got {n!r}")
+        n = integer(n, "n", low=1)
         rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
         t = self.tan_half
         near3, far3 = self.near**3, self.far**3

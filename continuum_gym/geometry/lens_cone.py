@@ -14,14 +14,24 @@ distance d_c of the tip and its gamma-derivative are eq (25) as paper-notes §1.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
-from continuum_gym.robots.validation import angle_in_open_interval, as_vectors, positive
+from continuum_gym.validation import (
+    angle_in_open_interval,
+    as_finite,
+    as_vectors,
+    choice,
+    positive,
+)
 
 LENS_MODELS = ("literal", "physical")
+#: What the cone kernels read: channel offset d_o (m), lens tilt alpha and half-angle beta (rad), and the
+#: lens model code (0 literal, 1 physical).
+ConeKernelArgs = namedtuple("ConeKernelArgs", ["d_o", "alpha", "beta", "model"])
 
 
 @dataclass(frozen=True)
@@ -44,19 +54,21 @@ class LensCone:
         object.__setattr__(self, "d_o", positive(self.d_o, "d_o", "m"))
         object.__setattr__(self, "alpha", angle_in_open_interval(self.alpha, "alpha", 0.0, math.pi / 2, "(0, pi/2)"))
         object.__setattr__(self, "beta", angle_in_open_interval(self.beta, "beta", 0.0, math.pi / 2, "(0, pi/2)"))
-        if self.lens_model not in LENS_MODELS:
-            raise ValueError(f"lens_model must be one of {LENS_MODELS}; got {self.lens_model!r}")
-        object.__setattr__(self, "_kernel_args", (self.d_o, self.alpha, self.beta, self.model_code))
+        choice(self.lens_model, LENS_MODELS, "lens_model")
+        object.__setattr__(self, "_kernel_args", ConeKernelArgs(self.d_o, self.alpha, self.beta, self.model_code))
 
     @property
     def model_code(self) -> int:
         """0 for literal, 1 for physical (what the compiled kernels take)."""
         return LENS_MODELS.index(self.lens_model)
 
-    @property
-    def kernel_args(self) -> tuple:
-        """(d_o, alpha, beta, model_code): the scalar arguments of every cone kernel."""
+    def kernel_args(self) -> ConeKernelArgs:
+        """(d_o, alpha, beta, model): the bundle every cone kernel reads."""
         return self._kernel_args
+
+    def to_dict(self) -> dict:
+        """The constructor arguments as plain YAML/JSON values (m, rad)."""
+        return {"d_o": self.d_o, "alpha": self.alpha, "beta": self.beta, "lens_model": self.lens_model}
 
 
 DEFAULT_CONE = LensCone()
@@ -152,11 +164,11 @@ def _cone_coordinates_batch(P, G, d_o, alpha, beta, model, out):
 
 
 # ---------------------------------------------------------------------- public functions
-def _points_and_gamma(points, gamma):
+def points_and_gamma(points, gamma) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Validated world points (..., 3) in m and endoscope rotations gamma (rad), broadcast together and
+    flattened: (P (n, 3), G (n,), batch shape)."""
     points = as_vectors(points, 3, "points")
-    gamma = np.asarray(gamma, dtype=np.float64)
-    if not np.all(np.isfinite(gamma)):
-        raise ValueError(f"gamma must be finite (rad); got {gamma}")
+    gamma = as_finite(gamma, (), "gamma")
     try:
         shape = np.broadcast_shapes(points.shape[:-1], gamma.shape)
     except ValueError as error:
@@ -175,7 +187,7 @@ def cone_coordinates(points, gamma, cone=None):
     the point in {lens} (eq 15).
     """
     cone = resolve_cone(cone)
-    P, G, shape = _points_and_gamma(points, gamma)
+    P, G, shape = points_and_gamma(points, gamma)
     out = np.empty((P.shape[0], 6))
     _cone_coordinates_batch(P, G, cone.d_o, cone.alpha, cone.beta, cone.model_code, out)
     return {
@@ -192,7 +204,7 @@ def centre_distance(tip, gamma, cone=None):
     Returns (d_c, dd_c_dgamma), each of the broadcast shape of tip[..., 0] and gamma.
     """
     cone = resolve_cone(cone)
-    P, G, shape = _points_and_gamma(tip, gamma)
+    P, G, shape = points_and_gamma(tip, gamma)
     dc = np.empty(P.shape[0])
     grad = np.empty(P.shape[0])
     _centre_distance_batch(P, G, cone.d_o, cone.alpha, cone.model_code, dc, grad)

@@ -18,18 +18,30 @@ import math
 import numpy as np
 from numba import njit
 
-from continuum_gym.geometry.lens_cone import cone_distance_slant, resolve_cone, to_lens_cs
-from continuum_gym.robots.mbcr import DOF, _as_q, all_finite, backbone_kernel, backbone_sample_count, make_workspace
+from continuum_gym.geometry.lens_cone import (
+    cone_distance_slant,
+    resolve_cone,
+    to_lens_cs,
+)
+from continuum_gym.robots.mbcr import (
+    MultiBackboneRobot,
+    all_finite,
+    backbone_kernel,
+    backbone_sample_count,
+    make_workspace,
+)
+from continuum_gym.validation import as_finite, integer
 
 VOI_SAMPLES_PER_SEGMENT = 40
 
 
 @njit(cache=True)
-def voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr):
+def voi_kernel(points, gamma, cone, lens, dr):
     """(voi, nu, r_e, r_max) of one sampled backbone ``points`` (m, 3); ``lens`` (m, 3), ``dr`` (m, 2) scratch.
 
-    r_e is NaN when there is no entry point.
+    ``cone`` is a ``LensCone.kernel_args()`` bundle. r_e is NaN when there is no entry point.
     """
+    d_o, alpha, beta, model = cone.d_o, cone.alpha, cone.beta, cone.model
     m = points.shape[0]
     cg = math.cos(gamma)
     sg = math.sin(gamma)
@@ -85,25 +97,24 @@ def voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr):
 
 
 @njit(cache=True)
-def voi_of_configuration(q, lengths, ws, gamma, d_o, alpha, beta, model, n_insert, n_per_segment,
-                         points, lens, dr):
+def voi_of_configuration(q, robot, ws, gamma, cone, n_per_segment, points, lens, dr):
     """VOI tuple of one configuration; ``points``, ``lens`` (m, 3) and ``dr`` (m, 2) are scratch."""
-    backbone_kernel(q, lengths, ws, n_insert, n_per_segment, points)
-    return voi_kernel(points, gamma, d_o, alpha, beta, model, lens, dr)
+    backbone_kernel(q, robot, ws, n_per_segment, points)
+    return voi_kernel(points, gamma, cone, lens, dr)
 
 
 @njit(cache=True)
-def _voi_batch(qs, G, lengths, d_o, alpha, beta, model, n_insert, n_per_segment, out):
+def _voi_batch(qs, G, robot, cone, n_per_segment, out):
     if not all_finite(qs):
         return False
-    ws = make_workspace()
-    m = n_insert + 3 * n_per_segment + 1
+    n = robot.lengths.shape[0]
+    ws = make_workspace(n)
+    m = robot.n_insert + n * n_per_segment + 1
     points = np.empty((m, 3))
     lens = np.empty((m, 3))
     dr = np.empty((m, 2))
     for i in range(qs.shape[0]):
-        voi, nu, r_e, r_max = voi_of_configuration(qs[i], lengths, ws, G[i], d_o, alpha, beta, model,
-                                                   n_insert, n_per_segment, points, lens, dr)
+        voi, nu, r_e, r_max = voi_of_configuration(qs[i], robot, ws, G[i], cone, n_per_segment, points, lens, dr)
         out[i, 0] = voi
         out[i, 1] = nu
         out[i, 2] = r_e
@@ -112,53 +123,54 @@ def _voi_batch(qs, G, lengths, d_o, alpha, beta, model, n_insert, n_per_segment,
 
 
 @njit(cache=True)
-def _voi_single(q, gamma, lengths, d_o, alpha, beta, model, n_insert, n_per_segment):
+def _voi_single(q, gamma, robot, cone, n_per_segment):
     if not all_finite(q) or not math.isfinite(gamma):
         return False, 0.0, 0.0, 0.0, 0.0
-    m = n_insert + 3 * n_per_segment + 1
-    voi, nu, r_e, r_max = voi_of_configuration(q, lengths, make_workspace(), gamma, d_o, alpha, beta, model,
-                                               n_insert, n_per_segment, np.empty((m, 3)), np.empty((m, 3)),
-                                               np.empty((m, 2)))
+    n = robot.lengths.shape[0]
+    m = robot.n_insert + n * n_per_segment + 1
+    voi, nu, r_e, r_max = voi_of_configuration(q, robot, make_workspace(n), gamma, cone, n_per_segment,
+                                               np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)))
     return True, voi, nu, r_e, r_max
 
 
-def occlusion_details(robot, q, gamma, cone=None, n_per_segment: int = VOI_SAMPLES_PER_SEGMENT):
+def occlusion_details(robot: MultiBackboneRobot, q, gamma, cone=None,
+                      n_per_segment: int = VOI_SAMPLES_PER_SEGMENT) -> dict:
     """VOI and its parts: dict of ``voi``, ``nu`` (rad), ``r_e`` (m, NaN without entry), ``r_max`` (m).
 
     Shapes: the broadcast of q.shape[:-1] and gamma.shape.
     """
+    if not isinstance(robot, MultiBackboneRobot):
+        raise ValueError(f"robot must be a MultiBackboneRobot; got {type(robot).__name__}")
     cone = resolve_cone(cone)
-    q = _as_q(q)
-    if q.ndim == 1 and isinstance(gamma, (float, int)) and n_per_segment == VOI_SAMPLES_PER_SEGMENT:
-        ok, *values = _voi_single(q, float(gamma), robot._lengths_array, *cone.kernel_args,
-                                  int(robot.n_insert_samples), VOI_SAMPLES_PER_SEGMENT)
+    q = robot.as_configuration(q)
+    if q.ndim == 0:
+        raise ValueError(f"q must have shape (..., {robot.dof}); got a scalar")
+    n_per_segment = integer(n_per_segment, "n_per_segment", low=1)
+    if q.ndim == 1 and isinstance(gamma, (float, int)) and not isinstance(gamma, bool):
+        ok, *values = _voi_single(q, float(gamma), robot.kernel_args(), cone.kernel_args(), n_per_segment)
         if not ok:
             raise ValueError(f"q and gamma must be finite (no NaN or inf); got q={q}, gamma={gamma}")
         return {key: np.asarray(v) for key, v in zip(("voi", "nu", "r_e", "r_max"), values)}
-    gamma = np.asarray(gamma, dtype=np.float64)
-    if not np.all(np.isfinite(gamma)):
-        raise ValueError(f"gamma must be finite (rad); got {gamma}")
+    gamma = as_finite(gamma, (), "gamma")
     try:
         shape = np.broadcast_shapes(q.shape[:-1], gamma.shape)
     except ValueError as error:
         raise ValueError(f"gamma of shape {gamma.shape} does not broadcast with q of shape {q.shape}") from error
-    if int(n_per_segment) != n_per_segment or n_per_segment < 1:
-        raise ValueError(f"n_per_segment must be an integer >= 1; got {n_per_segment!r}")
-    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (DOF,)).reshape(-1, DOF))
+    dof = robot.dof
+    Q = np.ascontiguousarray(np.broadcast_to(q, shape + (dof,)).reshape(-1, dof))
     G = np.ascontiguousarray(np.broadcast_to(gamma, shape).reshape(-1))
     out = np.empty((Q.shape[0], 4))
-    if not _voi_batch(Q, G, robot._lengths_array, *cone.kernel_args, int(robot.n_insert_samples),
-                      int(n_per_segment), out):
+    if not _voi_batch(Q, G, robot.kernel_args(), cone.kernel_args(), n_per_segment, out):
         raise ValueError(f"q must be finite (no NaN or inf); got {q}")
     return {key: out[:, k].reshape(shape) for k, key in enumerate(("voi", "nu", "r_e", "r_max"))}
 
 
-def visual_occlusion_index(robot, q, gamma, cone=None) -> np.ndarray:
+def visual_occlusion_index(robot: MultiBackboneRobot, q, gamma, cone=None) -> np.ndarray:
     """Visual Occlusion Index (eq 27, paper-notes §1.3 item 13) of shape q.shape[:-1] (0-d for one q).
 
     Args:
         robot: a ``MultiBackboneRobot``.
-        q: configuration(s), (..., 7).
+        q: configuration(s), (..., dof).
         gamma: endoscope rotation (rad); broadcasts with q.shape[:-1].
         cone: ``LensCone`` (d_o, alpha, beta, lens model); None means the paper's (literal lens).
     """

@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from continuum_gym.geometry.frustum import FACE_VERTICES, Frustum
-from continuum_gym.robots.validation import as_rotations, as_vectors
+from continuum_gym.validation import as_rotations, as_vectors
 
 __all__ = [
     "overlap_ratio",

@@ -6,12 +6,15 @@
   ``"external"``, ``"endoscope"`` and ``"davinci"``.
 - ``pixel_occlusion(robot, q, gamma, cone=None, resolution=128, scene=None)``: the fraction of the
   endoscope's circular field of view the robot covers.
-
-Importing this package does not import pybullet; the scenes import it when they are built.
+- ``meshes`` and ``textures`` are numpy only; importing this package does not import pybullet: the
+  scenes import it when they are built.
 """
 
 from continuum_gym.render.occlusion import clear_scene_cache, pixel_occlusion
-from continuum_gym.render.scene import CAMERAS_OCCLUSION, CAMERAS_VIEW_TRACKING, OcclusionScene, ViewTrackingScene
+from continuum_gym.render.occlusion_scene import OcclusionScene
+from continuum_gym.render.scene import CAMERAS_OCCLUSION, CAMERAS_VIEW_TRACKING
+from continuum_gym.render.textures import tissue_texture
+from continuum_gym.render.view_scene import ViewTrackingScene
 
 __all__ = ["OcclusionScene", "ViewTrackingScene", "pixel_occlusion", "clear_scene_cache", "CAMERAS_OCCLUSION",
-           "CAMERAS_VIEW_TRACKING"]
+           "CAMERAS_VIEW_TRACKING", "tissue_texture"]

@@ -18,7 +18,7 @@ _MAX_CACHED_SCENES = 2
 
 
 def _cached_scene(robot, cone):
-    from continuum_gym.render.scene import OcclusionScene
+    from continuum_gym.render.occlusion_scene import OcclusionScene
 
     key = (robot, cone)
     scene = _SCENES.get(key)

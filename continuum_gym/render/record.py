@@ -1,7 +1,8 @@
 """``continuum-gym render``: record one episode, external and robot-camera views side by side with VOI/OR.
 
 For ViewTracking the da Vinci camera's image is shown beside the continuum endoscope's, so the two
-views can be compared. ``.gif`` always works; ``.mp4`` uses imageio's ffmpeg plugin.
+views can be compared. ``.gif`` always works; ``.mp4`` uses imageio's ffmpeg plugin. What is recorded
+(cameras, default task, the value under the frames) comes from the env's spec.
 """
 
 from __future__ import annotations
@@ -12,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
-VIEW = "ContinuumGym/ViewTracking-v0"
+from continuum_gym.envs.spec import ENV_SPECS, get_spec
+from continuum_gym.validation import integer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--env", required=True, help=f"{OCCLUSION} or {VIEW}")
+    parser.add_argument("--env", required=True, help=f"environment id: {sorted(ENV_SPECS)}")
     parser.add_argument("--policy", default="baseline",
                         help="'baseline' (zero residual), or a run directory / model .zip / shipped policy name")
     parser.add_argument("--out", required=True, help="output file, .gif or .mp4")
@@ -26,10 +27,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=None, help="frames to record (default: the whole episode)")
     parser.add_argument("--size", type=int, default=192, help="image size in pixels (default 192)")
     parser.add_argument("--every", type=int, default=2, help="record every k-th step (default 2)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def _resolve_policy(name):
-    from continuum_gym.evaluation.evaluate import POLICY_DIR, load_policy
+def _resolve_policy(name: str, spec):
+    from continuum_gym.evaluation.evaluate import (
+        POLICY_DIR,
+        load_policy,
+        policy_env_kwargs,
+    )
 
     if name == "baseline":
         return None, {}
@@ -42,11 +48,10 @@ def _resolve_policy(name):
     if path.suffix == ".zip":
         path = path.parent
     model, config = load_policy(path)
-    env_kwargs = {k: v for k, v in config.get("env_kwargs", {}).items() if k in ("base_controller", "residual_scale")}
-    return model, env_kwargs
+    return model, policy_env_kwargs(spec, config)
 
 
-def _strip(values, width, height, label, vmax=1.0):
+def _strip(values, width: int, height: int, vmax: float = 1.0) -> np.ndarray:
     """A small line plot of ``values`` as an RGB array (no matplotlib per frame)."""
     image = np.full((height, width, 3), 255, dtype=np.uint8)
     if len(values) > 1:
@@ -60,60 +65,52 @@ def _strip(values, width, height, label, vmax=1.0):
 
 
 def run(args) -> int:
-    import gymnasium as gym
-    import imageio.v2 as imageio
-
-    import continuum_gym  # noqa: F401
-
-    if args.env not in (OCCLUSION, VIEW):
-        print(f"continuum-gym render: unknown env {args.env!r}; valid: {[OCCLUSION, VIEW]}", file=sys.stderr)
-        return 2
-    out = Path(args.out)
-    if out.suffix not in (".gif", ".mp4"):
-        print("continuum-gym render: --out must end in .gif or .mp4", file=sys.stderr)
-        return 2
     try:
-        model, env_kwargs = _resolve_policy(args.policy)
-    except FileNotFoundError as error:
+        spec = get_spec(args.env)
+        out = Path(args.out)
+        if out.suffix not in (".gif", ".mp4"):
+            raise ValueError(f"--out must end in .gif or .mp4; got {args.out!r}")
+        size = integer(args.size, "--size (pixels)", low=16, high=2048)
+        every = integer(args.every, "--every", low=1)
+        steps = None if args.steps is None else integer(args.steps, "--steps", low=1)
+        model, env_kwargs = _resolve_policy(args.policy, spec)
+    except (ValueError, FileNotFoundError) as error:
         print(f"continuum-gym render: {error}", file=sys.stderr)
         return 2
-    occlusion = args.env == OCCLUSION
-    task = args.task or ("circle" if occlusion else "case1")
-    env = gym.make(args.env, task=task, task_split="test", render_mode="rgb_array", **env_kwargs)
+    import gymnasium as gym
+    import imageio.v2 as imageio
+    from tqdm.auto import tqdm
+
+    env = gym.make(args.env, task=args.task or spec.record_task, task_split="test", render_mode="rgb_array",
+                   **env_kwargs)
     env.reset(seed=args.seed)
     core = env.unwrapped.core
-    scene = env.unwrapped._get_scene()
-    cameras = ("external", "endoscope") if occlusion else ("external", "endoscope", "davinci")
-    size = args.size
-    metric_name = "voi" if occlusion else "overlap_ratio"
+    scene = env.unwrapped.scene()
     history, frames = [], []
+    total = steps or int(core.limit[0])
+    bar = tqdm(total=total, desc="render", unit="step", disable=args.no_progress)
     step = 0
     while True:
         obs = core.obs[0].astype(np.float32)
-        action = np.zeros(env.action_space.shape, np.float32) if model is None else model.predict(obs, deterministic=True)[0]
+        action = np.zeros(env.action_space.shape, np.float32) if model is None else \
+            model.predict(obs, deterministic=True)[0]
         _, _, terminated, truncated, info = env.step(action)
-        history.append(info[metric_name])
+        history.append(info[spec.record_value])
         step += 1
-        if step % args.every == 0:
-            images = [_render(scene, core, camera, size, occlusion) for camera in cameras]
-            strip = _strip(history, size * len(cameras), max(size // 4, 24), metric_name)
+        bar.update()
+        if step % every == 0:
+            images = [core.render_row(0, scene, camera, size) for camera in spec.cameras]
+            strip = _strip(history, size * len(spec.cameras), max(size // 4, 24))
             frames.append(np.concatenate([np.concatenate(images, axis=1), strip], axis=0))
-        if terminated or truncated or (args.steps and step >= args.steps):
+        if terminated or truncated or (steps and step >= steps):
             break
+    bar.close()
     out.parent.mkdir(parents=True, exist_ok=True)
-    fps = max(1, int(round(1.0 / (core.control_dt * args.every))))
+    fps = max(1, int(round(1.0 / (core.control_dt * every))))
     if out.suffix == ".gif":
         imageio.mimsave(out, frames, duration=1000 / fps, loop=0)
     else:
         imageio.mimsave(out, frames, fps=fps)
     env.close()
-    print(f"wrote {out}: {len(frames)} frames, mean {metric_name} {np.mean(history):.3f}")
+    print(f"wrote {out}: {len(frames)} frames, mean {spec.record_value} {np.mean(history):.3f}")
     return 0
-
-
-def _render(scene, core, camera, size, occlusion):
-    if occlusion:
-        scene.update(core.q[0], core.gamma[0])
-    else:
-        scene.update(core.q[0], core.davinci_configuration(0))
-    return scene.render(camera=camera, width=size, height=size)

@@ -4,7 +4,11 @@ Nothing here imports gymnasium or torch.
 """
 
 from continuum_gym.robots.davinci import ALPHA_CONVENTIONS, DaVinciEndoscope
-from continuum_gym.robots.endoscope import ContinuumEndoscope, endoscope_segment_jacobian, endoscope_segment_pose
+from continuum_gym.robots.endoscope import (
+    ContinuumEndoscope,
+    endoscope_segment_jacobian,
+    endoscope_segment_pose,
+)
 from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
 from continuum_gym.robots.rotations import rotation_vector
 from continuum_gym.robots.segment import segment_tip_pose

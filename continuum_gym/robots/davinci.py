@@ -17,42 +17,89 @@ All lengths in m. Vectorised numpy; any finite q is accepted (limits are only da
 
 from __future__ import annotations
 
+import math
+from collections import namedtuple
+
 import numpy as np
+from numba import njit
 
-from .validation import angle_in_open_interval, as_configuration, positive
+from continuum_gym.validation import (
+    angle_in_open_interval,
+    as_configuration,
+    choice,
+    positive,
+)
 
-__all__ = ["DaVinciEndoscope", "ALPHA_CONVENTIONS"]
+__all__ = ["DaVinciEndoscope", "DaVinciKernelArgs", "ALPHA_CONVENTIONS", "davinci_pose", "stem_rotation"]
 
 #: Valid values of ``DaVinciEndoscope(alpha_convention=...)``.
 ALPHA_CONVENTIONS = ("eq2", "eq1")
 
-_DOF = 4
+DOF = 4
+#: What the compiled kernels read of the da Vinci endoscope: the signed viewing angle (rad; the sign
+#: encodes ``alpha_convention``), the view distance Le (m) and the joint ranges (4,) of Table II.
+DaVinciKernelArgs = namedtuple("DaVinciKernelArgs", ["alpha", "Le", "lower", "upper"])
 
 
-def _stem_rotation(q):
-    """``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)`` (..., 3, 3) of a validated q (..., 4).
-
-    Written out elementwise (one contiguous cos/sin call, no matmul), so a batch equals looped
-    single calls bit for bit.
-    """
-    angles = np.ascontiguousarray(q[..., 1:4])
-    cos, sin = np.cos(angles), np.sin(angles)
-    cy, cp, cr = cos[..., 0], cos[..., 1], cos[..., 2]
-    sy, sp, sr = sin[..., 0], sin[..., 1], sin[..., 2]
+@njit(cache=True, inline="always")
+def stem_rotation(yaw, pitch, roll, R):
+    """``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)`` into R (eqs 1, 2: w_R_dV1 dV1_R_dV2 dV2_R_dV3)."""
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cr, sr = math.cos(roll), math.sin(roll)
     # Ry Rx = [c0 c1 c2] with c0 = [cy, 0, -sy], c1 = [sy sp, cp, cy sp], c2 = [sy cp, -sp, cy cp];
     # then (Ry Rx) Rz = [cr c0 + sr c1, -sr c0 + cr c1, c2]
-    c1x, c1z = sy * sp, cy * sp
-    R = np.empty(q.shape[:-1] + (3, 3))
-    R[..., 0, 0] = cr * cy + sr * c1x
-    R[..., 1, 0] = sr * cp
-    R[..., 2, 0] = sr * c1z - cr * sy
-    R[..., 0, 1] = cr * c1x - sr * cy
-    R[..., 1, 1] = cr * cp
-    R[..., 2, 1] = sr * sy + cr * c1z
-    R[..., 0, 2] = sy * cp
-    R[..., 1, 2] = -sp
-    R[..., 2, 2] = cy * cp
-    return R
+    c1x = sy * sp
+    c1z = cy * sp
+    R[0, 0] = cr * cy + sr * c1x
+    R[1, 0] = sr * cp
+    R[2, 0] = sr * c1z - cr * sy
+    R[0, 1] = cr * c1x - sr * cy
+    R[1, 1] = cr * cp
+    R[2, 1] = sr * sy + cr * c1z
+    R[0, 2] = sy * cp
+    R[1, 2] = -sp
+    R[2, 2] = cy * cp
+
+
+@njit(cache=True)
+def davinci_pose(q_dv, dv, clip, p_cam, R_cam, p_tgt):
+    """Camera (= visual target) frame and target point of one da Vinci configuration (paper-notes §2.2).
+
+    ``dv`` is ``DaVinciEndoscope.kernel_args()``; with ``clip`` the configuration is first clipped to
+    its ranges. ``p_cam = R3 [0, 0, L_dV]``, ``R_cam = R3 Rx(-alpha)`` (eq 1 corrected, paper-notes §2.3
+    item 1), ``p_tgt = p_cam + Le z_cam`` (eq 2).
+    """
+    L = q_dv[0]
+    yaw = q_dv[1]
+    pitch = q_dv[2]
+    roll = q_dv[3]
+    if clip:
+        L = min(max(L, dv.lower[0]), dv.upper[0])
+        yaw = min(max(yaw, dv.lower[1]), dv.upper[1])
+        pitch = min(max(pitch, dv.lower[2]), dv.upper[2])
+        roll = min(max(roll, dv.lower[3]), dv.upper[3])
+    stem_rotation(yaw, pitch, roll, R_cam)
+    ca, sa = math.cos(dv.alpha), math.sin(dv.alpha)
+    for a in range(3):
+        r1 = R_cam[a, 1]
+        r2 = R_cam[a, 2]
+        p_cam[a] = L * r2
+        R_cam[a, 1] = ca * r1 - sa * r2
+        R_cam[a, 2] = sa * r1 + ca * r2
+        p_tgt[a] = p_cam[a] + dv.Le * R_cam[a, 2]
+
+
+@njit(cache=True)
+def _stem_batch(Q, out):
+    for i in range(Q.shape[0]):
+        stem_rotation(Q[i, 1], Q[i, 2], Q[i, 3], out[i])
+
+
+@njit(cache=True)
+def _pose_batch(Q, dv, clip, p_cam, R_cam, p_tgt):
+    for i in range(Q.shape[0]):
+        davinci_pose(Q[i], dv, clip, p_cam[i], R_cam[i], p_tgt[i])
 
 
 class DaVinciEndoscope:
@@ -67,26 +114,29 @@ class DaVinciEndoscope:
     ``q = [L_dV (m), yaw, pitch, roll (rad)]``; every method accepts shape (4,) or (..., 4).
     """
 
-    dof = _DOF
+    dof = DOF
     joint_names = ("L_dV", "yaw", "pitch", "roll")
 
-    def __init__(self, alpha=np.pi / 6, Le=0.120, alpha_convention="eq2"):
+    def __init__(self, alpha: float = np.pi / 6, Le: float = 0.120, alpha_convention: str = "eq2"):
         self._alpha = angle_in_open_interval(alpha, "alpha", -np.pi / 2, np.pi / 2, "(-pi/2, pi/2)")
         self._Le = positive(Le, "Le", "m")
-        if not isinstance(alpha_convention, str) or alpha_convention not in ALPHA_CONVENTIONS:
-            raise ValueError(
-                f"alpha_convention must be one of {', '.join(repr(c) for c in ALPHA_CONVENTIONS)}; "
-                f"got {alpha_convention!r}"
-            )
-        self._convention = alpha_convention
+        self._convention = choice(alpha_convention, ALPHA_CONVENTIONS, "alpha_convention")
         # signed viewing angle: the camera frame is R3 Rx(-sign * alpha), the target direction
         # in {dV3} is [0, sign * sin(alpha), cos(alpha)]
         sign = 1.0 if alpha_convention == "eq2" else -1.0
-        a = sign * self._alpha
-        self._cos_a = float(np.cos(a))
-        self._sin_a = float(np.sin(a))
         self._lower = np.array([0.0, -np.pi / 3, -np.pi / 3, -np.pi])
         self._upper = np.array([0.100, np.pi / 3, np.pi / 3, np.pi])
+        for array in (self._lower, self._upper):
+            array.flags.writeable = False
+        self._args = DaVinciKernelArgs(sign * self._alpha, self._Le, self._lower, self._upper)
+
+    def kernel_args(self) -> DaVinciKernelArgs:
+        """(signed alpha (rad), Le (m), lower (4,), upper (4,)): the bundle ``davinci_pose`` reads."""
+        return self._args
+
+    def to_dict(self) -> dict:
+        """The constructor arguments as plain YAML/JSON values (rad, m)."""
+        return {"alpha": self._alpha, "Le": self._Le, "alpha_convention": self._convention}
 
     alpha = property(lambda self: self._alpha, doc="Viewing angle alpha (rad).")
     Le = property(lambda self: self._Le, doc="View distance camera -> target point (m).")
@@ -104,7 +154,7 @@ class DaVinciEndoscope:
     @property
     def straight(self):
         """All zeros: stem along z_w, camera at the remote centre (L_dV = 0 m)."""
-        return np.zeros(_DOF)
+        return np.zeros(DOF)
 
     @property
     def home(self):
@@ -127,25 +177,22 @@ class DaVinciEndoscope:
         return {"straight": self.straight, "home": self.home, "case1": self.case1, "case2": self.case2}
 
     # -- kinematics ----------------------------------------------------------------------------
-    def stem_rotation(self, q):
+    def stem_rotation(self, q) -> np.ndarray:
         """``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)`` (..., 3, 3) (eqs 1, 2: w_R_dV1 dV1_R_dV2 dV2_R_dV3)."""
-        return _stem_rotation(as_configuration(q, _DOF))
+        q = as_configuration(q, DOF)
+        flat = np.ascontiguousarray(q.reshape(-1, DOF))
+        out = np.empty((flat.shape[0], 3, 3))
+        _stem_batch(flat, out)
+        return out.reshape(q.shape[:-1] + (3, 3))
 
     def _poses(self, q):
-        q = as_configuration(q, _DOF)
-        w_R_dV3 = _stem_rotation(q)
-        r1, r2 = w_R_dV3[..., :, 1], w_R_dV3[..., :, 2]
-        # camera at the stem tip: w_R_dV3 dV3_p_dVe with dV3_p_dVe = [0, 0, L_dV], dV3_R_dVe = I
-        p_cam = q[..., 0:1] * r2
-        # w_R_cam = w_R_dV3 Rx(-a): columns r0, c r1 - s r2, s r1 + c r2 (a = +-alpha by convention)
-        c, s = self._cos_a, self._sin_a
-        w_R_cam = w_R_dV3  # column 0 is shared; columns 1, 2 are overwritten below
-        z_cam = s * r1 + c * r2
-        w_R_cam[..., :, 1] = c * r1 - s * r2
-        w_R_cam[..., :, 2] = z_cam
-        # eq (2): p_dVt = cam + w_R_dV3 Le [0, sin a, cos a] = cam + Le z_cam
-        p_t = p_cam + self._Le * z_cam
-        return p_cam, w_R_cam, p_t
+        q = as_configuration(q, DOF)
+        flat = np.ascontiguousarray(q.reshape(-1, DOF))
+        n = flat.shape[0]
+        p_cam, w_R_cam, p_t = np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 3))
+        _pose_batch(flat, self._args, False, p_cam, w_R_cam, p_t)
+        lead = q.shape[:-1]
+        return p_cam.reshape(lead + (3,)), w_R_cam.reshape(lead + (3, 3)), p_t.reshape(lead + (3,))
 
     def forward_kinematics(self, q):
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.

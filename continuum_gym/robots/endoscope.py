@@ -13,89 +13,75 @@ to {2b}; segment 2 from {2b} to {2e}. The camera sits ``Lc`` along ``z_2e`` from
 All lengths are in metres. The kinematics accept any finite ``q``; joint limits are only data.
 
 The hot path (forward kinematics + Jacobian) is one numba kernel that loops over a flattened
-batch, so a batched result equals the looped single results bit for bit.
+batch, so a batched result equals the looped single results bit for bit. Both segments use the
+segment terms of ``continuum_gym.robots.segment``.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
-from .validation import as_configuration, positive
+from continuum_gym.robots.segment import (  # noqa: F401  (the segment functions are public here too)
+    SERIES_SWITCH,
+    bend_rotation,
+    bend_terms,
+    endoscope_segment_jacobian,
+    endoscope_segment_pose,
+)
+from continuum_gym.validation import (
+    as_array,
+    as_configuration,
+    integer,
+    number,
+    positive,
+)
 
 __all__ = [
     "ContinuumEndoscope",
+    "EndoscopeKernelArgs",
+    "EndoscopeWorkspace",
     "SERIES_THRESHOLD",
+    "endoscope_kinematics",
     "endoscope_segment_pose",
     "endoscope_segment_jacobian",
+    "make_endoscope_workspace",
 ]
 
 #: |theta| below which the series of paper-notes §2.2 replace the closed forms of eqs (3), (5).
-SERIES_THRESHOLD = 2e-3
+SERIES_THRESHOLD = SERIES_SWITCH
 
-_DOF = 6
+DOF = 6
+#: What the compiled kernels read of the endoscope: its lengths (m).
+EndoscopeKernelArgs = namedtuple("EndoscopeKernelArgs", ["L1", "Lm", "L2", "Lc", "Le"])
+#: Scratch of one evaluation: the two segment rotations and w_R_1e (3 x 3 each).
+EndoscopeWorkspace = namedtuple("EndoscopeWorkspace", ["R1", "W1", "R2"])
 
 
-# ----------------------------------------------------------------------------------------------
-# Scalar building blocks (compiled; inlined into the batch kernels)
-# ----------------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def _bend_terms(theta):
-    """Return ``s, omc, a, b, da, db`` of a bending angle ``theta`` (rad).
-
-    ``s = sin(theta)``, ``omc = 1 - cos(theta)`` (via the half angle, no cancellation),
-    ``a = (1 - cos)/theta``, ``b = sin/theta`` and their derivatives ``da``, ``db`` in theta.
-    Below ``SERIES_THRESHOLD`` the series of paper-notes §2.2 are used, so all are exact and finite
-    at theta = 0.
-    """
-    sh = math.sin(0.5 * theta)
-    ch = math.cos(0.5 * theta)
-    s = 2.0 * sh * ch
-    omc = 2.0 * sh * sh
-    if abs(theta) < SERIES_THRESHOLD:
-        t2 = theta * theta
-        a = theta * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0))
-        b = 1.0 - t2 * (1.0 / 6.0 - t2 / 120.0)
-        da = 0.5 - t2 * (1.0 / 8.0 - t2 / 144.0)
-        db = -theta * (1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 / 840.0))
-    else:
-        a = omc / theta
-        b = s / theta
-        da = (s - a) / theta  # sin/theta - (1 - cos)/theta^2
-        db = (1.0 - omc - b) / theta  # cos/theta - sin/theta^2
-    return s, omc, a, b, da, db
+@njit(cache=True)
+def make_endoscope_workspace():
+    """Scratch arrays of ``endoscope_kinematics``."""
+    return EndoscopeWorkspace(np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)))
 
 
 @njit(cache=True, inline="always")
-def _segment_rotation(s, omc, cd, sd, R):
-    """Write ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (eq 4 corrected, paper-notes §2.3 item 2) into R."""
-    R[0, 0] = 1.0 - omc * cd * cd
-    R[0, 1] = omc * cd * sd
-    R[0, 2] = s * cd
-    R[1, 0] = omc * cd * sd
-    R[1, 1] = 1.0 - omc * sd * sd
-    R[1, 2] = -s * sd
-    R[2, 0] = -s * cd
-    R[2, 1] = s * sd
-    R[2, 2] = 1.0 - omc
-
-
-@njit(cache=True, inline="always")
-def _kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian, R1, W1, R2):
+def endoscope_kinematics(q, robot, ws, p_cam, w_R_cam, p_ct, J, with_jacobian):
     """Eqs (3), (4), (7), (8) and, if ``with_jacobian``, eq (9) for one configuration.
 
-    ``geom = [L1, Lm, L2, Lc, Le]`` (m). Writes the camera position ``p_cam`` (m), the camera /
-    target rotation ``w_R_cam = w_R_2e``, the target point ``p_ct`` (m) and the 6x6 twist Jacobian
-    ``J`` of ct in {w} (rows [v; w], columns L0, phi, theta1, delta1, theta2, delta2).
-    ``R1``, ``W1``, ``R2`` are 3x3 scratch arrays.
+    ``robot`` is ``ContinuumEndoscope.kernel_args()`` (lengths in m), ``ws`` an ``EndoscopeWorkspace``.
+    Writes the camera position ``p_cam`` (m), the camera / target rotation ``w_R_cam = w_R_2e``, the
+    target point ``p_ct`` (m) and the 6x6 twist Jacobian ``J`` of ct in {w} (rows [v; w], columns L0,
+    phi, theta1, delta1, theta2, delta2).
     """
-    L1 = geom[0]
-    Lm = geom[1]
-    L2 = geom[2]
-    Lc = geom[3]
-    Le = geom[4]
+    R1, W1, R2 = ws.R1, ws.W1, ws.R2
+    L1 = robot.L1
+    Lm = robot.Lm
+    L2 = robot.L2
+    Lc = robot.Lc
+    Le = robot.Le
     L0 = q[0]
     cp = math.cos(q[1])
     sp = math.sin(q[1])
@@ -103,11 +89,11 @@ def _kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian, R1, W1, R2)
     sd1 = math.sin(q[3])
     cd2 = math.cos(q[5])
     sd2 = math.sin(q[5])
-    s1, omc1, a1, b1, da1, db1 = _bend_terms(q[2])
-    s2, omc2, a2, b2, da2, db2 = _bend_terms(q[4])
+    s1, omc1, a1, b1, da1, db1 = bend_terms(q[2])
+    s2, omc2, a2, b2, da2, db2 = bend_terms(q[4])
 
     # segment 1 in {1b}: eq (3) as L*[c_d a, -s_d a, b], eq (4) corrected
-    _segment_rotation(s1, omc1, cd1, sd1, R1)
+    bend_rotation(s1, omc1, cd1, sd1, R1)
     p1x = L1 * cd1 * a1
     p1y = -L1 * sd1 * a1
     p1z = L1 * b1
@@ -124,7 +110,7 @@ def _kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian, R1, W1, R2)
     b2y = e1y + Lm * W1[1, 2]
     b2z = e1z + Lm * W1[2, 2]
     # segment 2 in {2b}
-    _segment_rotation(s2, omc2, cd2, sd2, R2)
+    bend_rotation(s2, omc2, cd2, sd2, R2)
     p2x = L2 * cd2 * a2
     p2y = -L2 * sd2 * a2
     p2z = L2 * b2
@@ -240,46 +226,32 @@ def _require_finite(q):
 
 
 @njit(cache=True)
-def _kinematics_into_1(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian):
-    """One configuration q (6,) into p_cam (3,), w_R_cam (3, 3), p_ct (3,) and, if ``with_jacobian``,
-    J (6, 6)."""
-    _require_finite(q)
-    R1 = np.empty((3, 3))
-    W1 = np.empty((3, 3))
-    R2 = np.empty((3, 3))
-    _kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian, R1, W1, R2)
-
-
-@njit(cache=True)
-def _kinematics_into(Q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian):
-    """Batch version of ``_kinematics_into_1``: Q (n, 6); J (n, 6, 6) if ``with_jacobian``, else unused."""
+def _kinematics_batch(Q, robot, p_cam, w_R_cam, p_ct, J, with_jacobian):
+    """Rows of Q (n, 6) into p_cam (n, 3), w_R_cam (n, 3, 3), p_ct (n, 3) and, if ``with_jacobian``,
+    J (n, 6, 6) (else J is (1, 6, 6) and unused)."""
     for k in range(Q.shape[0]):
         _require_finite(Q[k])
-    R1 = np.empty((3, 3))
-    W1 = np.empty((3, 3))
-    R2 = np.empty((3, 3))
+    ws = make_endoscope_workspace()
     for k in range(Q.shape[0]):
-        _kinematics_one(
-            Q[k], geom, p_cam[k], w_R_cam[k], p_ct[k], J[k if with_jacobian else 0], with_jacobian, R1, W1, R2
-        )
+        endoscope_kinematics(Q[k], robot, ws, p_cam[k], w_R_cam[k], p_ct[k], J[k if with_jacobian else 0],
+                             with_jacobian)
 
 
-# placeholders for J when only forward kinematics are asked for (never written)
-_UNUSED_J_1 = np.empty((6, 6))
-_UNUSED_J_N = np.empty((1, 6, 6))
+# placeholder for J when only forward kinematics are asked for (never written)
+_UNUSED_J = np.empty((1, 6, 6))
 
 
 @njit(cache=True)
-def _backbone_batch(Q, geom, m):
+def _backbone_batch(Q, robot, m):
     """Centre line samples (n, 2m + 4, 3) in m: origin, {1b}, m points of segment 1, {2b}, m points of
     segment 2, camera."""
     n = Q.shape[0]
     npts = 2 * m + 4
     out = np.empty((n, npts, 3))
-    L1 = geom[0]
-    Lm = geom[1]
-    L2 = geom[2]
-    Lc = geom[3]
+    L1 = robot.L1
+    Lm = robot.Lm
+    L2 = robot.L2
+    Lc = robot.Lc
     R1 = np.empty((3, 3))
     R2 = np.empty((3, 3))
     W1 = np.empty((3, 3))
@@ -302,15 +274,15 @@ def _backbone_batch(Q, geom, m):
         # segment 1, fractions 1/m .. 1 of the arc (arc of length f L1 bending f theta1)
         for i in range(1, m + 1):
             f = i / m
-            s, omc, a, b, da, db = _bend_terms(f * Q[k, 2])
+            s, omc, a, b, da, db = bend_terms(f * Q[k, 2])
             px = f * L1 * cd1 * a
             py = -f * L1 * sd1 * a
             pz = f * L1 * b
             out[k, 1 + i, 0] = cp * px - sp * py
             out[k, 1 + i, 1] = sp * px + cp * py
             out[k, 1 + i, 2] = L0 + pz
-        s1, omc1, a1, b1, da1, db1 = _bend_terms(Q[k, 2])
-        _segment_rotation(s1, omc1, cd1, sd1, R1)
+        s1, omc1, a1, b1, da1, db1 = bend_terms(Q[k, 2])
+        bend_rotation(s1, omc1, cd1, sd1, R1)
         for j in range(3):
             W1[0, j] = cp * R1[0, j] - sp * R1[1, j]
             W1[1, j] = sp * R1[0, j] + cp * R1[1, j]
@@ -324,7 +296,7 @@ def _backbone_batch(Q, geom, m):
         out[k, 2 + m, 2] = bz
         for i in range(1, m + 1):
             f = i / m
-            s, omc, a, b, da, db = _bend_terms(f * Q[k, 4])
+            s, omc, a, b, da, db = bend_terms(f * Q[k, 4])
             px = f * L2 * cd2 * a
             py = -f * L2 * sd2 * a
             pz = f * L2 * b
@@ -332,90 +304,33 @@ def _backbone_batch(Q, geom, m):
                 out[k, 2 + m + i, r] = (
                     out[k, 2 + m, r] + W1[r, 0] * px + W1[r, 1] * py + W1[r, 2] * pz
                 )
-        s2, omc2, a2, b2, da2, db2 = _bend_terms(Q[k, 4])
-        _segment_rotation(s2, omc2, cd2, sd2, R2)
+        s2, omc2, a2, b2, da2, db2 = bend_terms(Q[k, 4])
+        bend_rotation(s2, omc2, cd2, sd2, R2)
         for r in range(3):
             z = W1[r, 0] * R2[0, 2] + W1[r, 1] * R2[1, 2] + W1[r, 2] * R2[2, 2]
             out[k, npts - 1, r] = out[k, npts - 2, r] + Lc * z
     return out
 
 
-# ----------------------------------------------------------------------------------------------
-# Single-segment functions (numpy, broadcasting) — eqs (3)–(6)
-# ----------------------------------------------------------------------------------------------
-def _bend_terms_np(theta):
-    theta = np.asarray(theta, dtype=np.float64)
-    sh = np.sin(0.5 * theta)
-    s = 2.0 * sh * np.cos(0.5 * theta)
-    omc = 2.0 * sh * sh
-    small = np.abs(theta) < SERIES_THRESHOLD
-    safe = np.where(small, 1.0, theta)
-    t2 = theta * theta
-    a = np.where(small, theta * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0)), omc / safe)
-    b = np.where(small, 1.0 - t2 * (1.0 / 6.0 - t2 / 120.0), s / safe)
-    da = np.where(small, 0.5 - t2 * (1.0 / 8.0 - t2 / 144.0), (s - a) / safe)
-    db = np.where(
-        small, -theta * (1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 / 840.0)), (1.0 - omc - b) / safe
-    )
-    return s, omc, a, b, da, db
-
-
-def _segment_args(theta, delta, length):
-    length = positive(length, "length", "m")
-    theta = np.asarray(theta, dtype=np.float64)
-    delta = np.asarray(delta, dtype=np.float64)
-    if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(delta))):
-        raise ValueError("theta and delta must be finite (rad)")
-    theta, delta = np.broadcast_arrays(theta, delta)
-    return theta, delta, length
-
-
-def endoscope_segment_pose(theta, delta, length):
-    """Pose of {te} in {tb} of one constant-curvature segment (eqs 3 and 4, paper-notes §2.3 item 2).
-
-    ``theta`` (rad, 0 = straight), ``delta`` (rad) broadcast together; ``length`` in m.
-    Returns ``tb_p_te`` (..., 3) in m and ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (..., 3, 3).
-    Exact and finite at theta = 0 (series of paper-notes §2.2 below ``SERIES_THRESHOLD``).
-    """
-    theta, delta, length = _segment_args(theta, delta, length)
-    s, omc, a, b, _, _ = _bend_terms_np(theta)
-    cd, sd = np.cos(delta), np.sin(delta)
-    tb_p_te = length * np.stack([cd * a, -sd * a, b], axis=-1)
-    tb_R_te = np.stack(
-        [
-            np.stack([1.0 - omc * cd * cd, omc * cd * sd, s * cd], axis=-1),
-            np.stack([omc * cd * sd, 1.0 - omc * sd * sd, -s * sd], axis=-1),
-            np.stack([-s * cd, s * sd, 1.0 - omc], axis=-1),
-        ],
-        axis=-2,
-    )
-    return tb_p_te, tb_R_te
-
-
-def endoscope_segment_jacobian(theta, delta, length):
-    """Twist Jacobian of {te}'s origin in {tb} per [theta, delta] rate (eqs 5 and 6, as printed).
-
-    Returns (..., 6, 2): rows [J_tv (m/rad); J_tw (rad/rad)], columns theta, delta. ``length`` in m.
-    Below ``SERIES_THRESHOLD`` uses the series of paper-notes §2.2 (exact and finite at theta = 0).
-    """
-    theta, delta, length = _segment_args(theta, delta, length)
-    s, omc, a, _, da, db = _bend_terms_np(theta)
-    cd, sd = np.cos(delta), np.sin(delta)
-    zero = np.zeros_like(theta)
-    rows = [
-        [length * cd * da, -length * sd * a],
-        [-length * sd * da, -length * cd * a],
-        [length * db, zero],
-        [sd, cd * s],
-        [cd, -sd * s],
-        [zero, -omc],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
-
 
 # ----------------------------------------------------------------------------------------------
 # Robot class
 # ----------------------------------------------------------------------------------------------
+#: Table II / paper-notes §2.1 joint limits: L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in
+#: [0, pi/4], theta2 in [0, pi/2]; the deltas are unlimited (wrapped by the controllers).
+PAPER_LOWER = (0.0, -math.pi, 0.0, -math.inf, 0.0, -math.inf)
+PAPER_UPPER = (0.100, math.pi, math.pi / 4, math.inf, math.pi / 2, math.inf)
+#: Physical ranges a user's limits must stay in: insertion 0-0.5 m, |phi| <= pi, bends 0-pi.
+_LIMIT_RANGES = ((0.0, 0.5, "m"), (-math.pi, math.pi, "rad"), (0.0, math.pi, "rad"), (-math.inf, math.inf, "rad"),
+                 (0.0, math.pi, "rad"), (-math.inf, math.inf, "rad"))
+
+
+def _read_only(values) -> np.ndarray:
+    array = np.array(values, dtype=float)
+    array.flags.writeable = False
+    return array
+
+
 class ContinuumEndoscope:
     """6-DoF two-segment continuum endoscope (paper 001, Fig. 2c, Table II; paper-notes §2).
 
@@ -425,131 +340,103 @@ class ContinuumEndoscope:
         L2: length of segment 2 (default 0.030).
         Lc: camera offset along z_2e from the end of segment 2 (default 0.020).
         Le: effective view distance, camera to target point ct (default 0.120).
+        joint_limits: ``(lower, upper)``, each 6 values [L0 (m), phi, theta1, delta1, theta2, delta2 (rad)];
+            ``None`` is Table II's. L0 within [0, 0.5] m, phi within [-pi, pi], bends within [0, pi];
+            the deltas may be +-inf (unlimited, wrapped).
 
     ``q = [L0 (m), phi, theta1, delta1, theta2, delta2 (rad)]``; every method accepts shape (6,)
     or (..., 6) and returns matching leading dimensions.
     """
 
-    dof = _DOF
+    dof = DOF
     joint_names = ("L0", "phi", "theta1", "delta1", "theta2", "delta2")
 
-    def __init__(self, L1=0.020, Lm=0.006, L2=0.030, Lc=0.020, Le=0.120):
-        self._geom = np.array(
-            [
-                positive(L1, "L1", "m"),
-                positive(Lm, "Lm", "m"),
-                positive(L2, "L2", "m"),
-                positive(Lc, "Lc", "m"),
-                positive(Le, "Le", "m"),
-            ]
-        )
-        self._geom.flags.writeable = False
-        # Table II / paper-notes §2.1: L0 in m; phi hard limit; deltas unlimited (wrapped by controllers)
-        self._lower = np.array([0.0, -np.pi, 0.0, -np.inf, 0.0, -np.inf])
-        self._upper = np.array([0.100, np.pi, np.pi / 4, np.inf, np.pi / 2, np.inf])
-        self._lower.flags.writeable = False
-        self._upper.flags.writeable = False
+    def __init__(self, L1: float = 0.020, Lm: float = 0.006, L2: float = 0.030, Lc: float = 0.020,
+                 Le: float = 0.120, joint_limits=None):
+        self._args = EndoscopeKernelArgs(positive(L1, "L1", "m"), positive(Lm, "Lm", "m"), positive(L2, "L2", "m"),
+                                         positive(Lc, "Lc", "m"), positive(Le, "Le", "m"))
+        self._geom = _read_only(self._args)
+        if joint_limits is None:
+            lower, upper = PAPER_LOWER, PAPER_UPPER
+        else:
+            try:
+                lower, upper = joint_limits
+            except (TypeError, ValueError):
+                raise ValueError("joint_limits must be (lower, upper), each 6 values [L0 (m), phi, theta1, delta1, "
+                                 f"theta2, delta2 (rad)]; got {joint_limits!r}") from None
+            lower = as_array(lower, "joint_limits lower", (6,)).reshape(6)
+            upper = as_array(upper, "joint_limits upper", (6,)).reshape(6)
+            for k, (lo, hi, unit) in enumerate(_LIMIT_RANGES):
+                name = self.joint_names[k]
+                for side, value in (("lower", lower[k]), ("upper", upper[k])):
+                    if math.isfinite(lo) or math.isfinite(value):  # only the deltas may be unlimited (+-inf)
+                        number(value, f"joint_limits {side} {name}", low=lo, high=hi, unit=unit)
+                if math.isnan(lower[k]) or math.isnan(upper[k]) or not lower[k] < upper[k]:
+                    raise ValueError(f"joint_limits: lower {name} must be < upper {name}; got {lower[k]} and "
+                                     f"{upper[k]}")
+        self._lower = _read_only(lower)
+        self._upper = _read_only(upper)
 
     # -- parameters ---------------------------------------------------------------------------
-    L1 = property(lambda self: float(self._geom[0]), doc="Segment 1 length (m).")
-    Lm = property(lambda self: float(self._geom[1]), doc="Rigid cylinder length (m).")
-    L2 = property(lambda self: float(self._geom[2]), doc="Segment 2 length (m).")
-    Lc = property(lambda self: float(self._geom[3]), doc="Camera offset from the end of segment 2 (m).")
-    Le = property(lambda self: float(self._geom[4]), doc="View distance camera -> target point (m).")
+    L1 = property(lambda self: self._args.L1, doc="Segment 1 length (m).")
+    Lm = property(lambda self: self._args.Lm, doc="Rigid cylinder length (m).")
+    L2 = property(lambda self: self._args.L2, doc="Segment 2 length (m).")
+    Lc = property(lambda self: self._args.Lc, doc="Camera offset from the end of segment 2 (m).")
+    Le = property(lambda self: self._args.Le, doc="View distance camera -> target point (m).")
+
+    def kernel_args(self) -> EndoscopeKernelArgs:
+        """(L1, Lm, L2, Lc, Le) in m: the bundle ``endoscope_kinematics`` and the controllers' kernels read."""
+        return self._args
 
     @property
-    def geometry(self):
-        """Read-only float64 array ``[L1, Lm, L2, Lc, Le]`` (m): the ``geom`` argument of the kernels.
-
-        Compiled controllers call ``_kinematics_one(q, geom, p_cam, w_R_cam, p_ct, J, with_jacobian,
-        R1, W1, R2)`` with it inside their own loops.
-        """
+    def geometry(self) -> np.ndarray:
+        """Read-only float64 array ``[L1, Lm, L2, Lc, Le]`` (m)."""
         return self._geom
 
     @property
-    def joint_limits(self):
-        """``(lower, upper)``, each shape (6,): L0 in m, angles in rad; deltas are ±inf.
-
-        Table II / paper-notes §2.1: L0 in [0, 0.1] m, phi in [-pi, pi] (hard), theta1 in [0, pi/4],
-        theta2 in [0, pi/2]. Fresh copies.
-        """
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)``, each shape (6,): L0 in m, angles in rad; deltas may be +-inf. Fresh copies."""
         return self._lower.copy(), self._upper.copy()
 
     # -- named configurations -----------------------------------------------------------------
     @property
-    def straight(self):
+    def straight(self) -> np.ndarray:
         """All zeros: stem not inserted (L0 = 0 m), both segments straight."""
-        return np.zeros(_DOF)
+        return np.zeros(DOF)
 
     @property
-    def case_study_start(self):
+    def case_study_start(self) -> np.ndarray:
         """Psi0 of the case studies (paper-notes §2.1): [0.008 m, 0, 0.3857, -1.57, 0.7828, 1.57]."""
         return np.array([0.008, 0.0, 0.3857, -1.57, 0.7828, 1.57])
 
     home = case_study_start
 
     @property
-    def named_configurations(self):
+    def named_configurations(self) -> dict:
         """``{"straight": ..., "home": ..., "case_study_start": ...}`` (fresh arrays)."""
-        return {
-            "straight": self.straight,
-            "home": self.home,
-            "case_study_start": self.case_study_start,
-        }
-
-    # -- input handling ----------------------------------------------------------------------
-    @staticmethod
-    def _array(q):
-        """``q`` as a float64 array of shape (..., 6), C-contiguous and writeable (finiteness is
-        checked in the kernels; every error is raised by ``as_configuration`` so it names q)."""
-        try:
-            array = np.asarray(q, dtype=np.float64)
-        except (TypeError, ValueError):
-            as_configuration(q, _DOF)  # raises with a message naming q
-            raise
-        if array.ndim == 0 or array.shape[-1] != _DOF:
-            as_configuration(array, _DOF)  # raises
-        flags = array.flags
-        if not (flags.c_contiguous and flags.writeable):
-            array = np.array(array, order="C")
-        return array
-
-    def _run(self, q, with_jacobian):
-        """reshape -> kernel -> reshape: ``(p_cam, w_R_cam, p_ct, J or None)`` with q's leading shape."""
-        array = self._array(q)
-        lead = array.shape[:-1]
-        p_cam = np.empty(lead + (3,))
-        w_R_cam = np.empty(lead + (3, 3))
-        p_ct = np.empty(lead + (3,))
-        J = np.empty(lead + (6, 6)) if with_jacobian else None
-        try:
-            if array.ndim == 1:
-                _kinematics_into_1(
-                    array,
-                    self._geom,
-                    p_cam,
-                    w_R_cam,
-                    p_ct,
-                    J if with_jacobian else _UNUSED_J_1,
-                    with_jacobian,
-                )
-            else:
-                _kinematics_into(
-                    array.reshape(-1, _DOF),
-                    self._geom,
-                    p_cam.reshape(-1, 3),
-                    w_R_cam.reshape(-1, 3, 3),
-                    p_ct.reshape(-1, 3),
-                    J.reshape(-1, 6, 6) if with_jacobian else _UNUSED_J_N,
-                    with_jacobian,
-                )
-        except ValueError:
-            as_configuration(array, _DOF)  # raises "q must be finite ..."
-            raise
-        return p_cam, w_R_cam, p_ct, J
+        return {"straight": self.straight, "home": self.home, "case_study_start": self.case_study_start}
 
     # -- kinematics ----------------------------------------------------------------------------
-    def forward_kinematics(self, q):
+    def _run(self, q, with_jacobian):
+        """reshape -> kernel -> reshape: ``(p_cam, w_R_cam, p_ct, J or None)`` with q's leading shape."""
+        array = np.ascontiguousarray(as_array(q, "q", (DOF,)))
+        if array.ndim == 0:
+            raise ValueError(f"q must have shape (..., {DOF}); got a scalar")
+        lead = array.shape[:-1]
+        n = int(np.prod(lead, dtype=np.int64))
+        p_cam = np.empty((n, 3))
+        w_R_cam = np.empty((n, 3, 3))
+        p_ct = np.empty((n, 3))
+        J = np.empty((n, 6, 6)) if with_jacobian else _UNUSED_J
+        try:
+            _kinematics_batch(array.reshape(-1, DOF), self._args, p_cam, w_R_cam, p_ct, J, with_jacobian)
+        except ValueError:
+            as_configuration(array, DOF)  # raises "q must be finite ..."
+            raise
+        return (p_cam.reshape(lead + (3,)), w_R_cam.reshape(lead + (3, 3)), p_ct.reshape(lead + (3,)),
+                J.reshape(lead + (6, 6)) if with_jacobian else None)
+
+    def forward_kinematics(self, q) -> tuple[np.ndarray, np.ndarray]:
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
         Eqs (3), (4), (7), (8) with paper-notes §2.2 and §2.3 item 2. The camera sits ``Lc`` along z_2e
@@ -558,16 +445,16 @@ class ContinuumEndoscope:
         p_cam, w_R_cam, _, _ = self._run(q, False)
         return p_cam, w_R_cam
 
-    def target_point(self, q):
+    def target_point(self, q) -> np.ndarray:
         """Visual target point ct, ``Lc + Le`` along z_2e from the end of segment 2: (..., 3) in m (eq 8)."""
         return self._run(q, False)[2]
 
-    def target_pose(self, q):
+    def target_pose(self, q) -> tuple[np.ndarray, np.ndarray]:
         """``(w_p_ct (..., 3) in m, w_R_ct (..., 3, 3))`` (eqs 7 and 8 with paper-notes §2.2 / §2.3 item 2)."""
         _, w_R_ct, p_ct, _ = self._run(q, False)
         return p_ct, w_R_ct
 
-    def jacobian(self, q):
+    def jacobian(self, q) -> np.ndarray:
         """Twist Jacobian of the target point ct in {w}: (..., 6, 6).
 
         Eq (9) corrected per paper-notes §2.2 and §2.3 item 3.
@@ -578,32 +465,34 @@ class ContinuumEndoscope:
         """
         return self._run(q, True)[3]
 
-    def fk_jacobian(self, q):
-        """Everything in one kernel call: ``(p_cam (m), R, p_ct (m), J)`` as in the methods above.
-
-        Equals ``forward_kinematics``, ``target_point`` and ``jacobian`` exactly; the fast path for
-        controllers.
-        """
+    def fk_jacobian(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Everything in one kernel call: ``(p_cam (m), R, p_ct (m), J)`` as in the methods above."""
         return self._run(q, True)
 
-    def backbone(self, q, n_per_segment=20):
+    def backbone(self, q, n_per_segment: int = 20) -> np.ndarray:
         """Sampled centre line for drawing: (..., 2 * n_per_segment + 4, 3) in m.
 
         Points: base origin (0, 0, 0); {1b} at [0, 0, L0]; ``n_per_segment`` points along segment 1
         (ending at {1e}); {2b} after the rigid Lm cylinder; ``n_per_segment`` points along segment 2
         (ending at {2e}); the camera, Lc further along z_2e. Arcs follow eq (3) at fractions of the segment.
         """
-        m = int(n_per_segment)
-        if m != n_per_segment or m < 1:
-            raise ValueError(f"n_per_segment must be an integer >= 1; got {n_per_segment!r}")
-        array = self._array(q)
+        m = integer(n_per_segment, "n_per_segment", low=1)
+        array = np.ascontiguousarray(as_array(q, "q", (DOF,)))
         try:
-            pts = _backbone_batch(array.reshape(-1, _DOF), self._geom, m)
+            pts = _backbone_batch(array.reshape(-1, DOF), self._args, m)
         except ValueError:
-            as_configuration(array, _DOF)  # raises "q must be finite ..."
+            as_configuration(array, DOF)  # raises "q must be finite ..."
             raise
         return pts.reshape(array.shape[:-1] + (2 * m + 4, 3))
 
-    def __repr__(self):
-        L1, Lm, L2, Lc, Le = self._geom
+    def to_dict(self) -> dict:
+        """The constructor arguments as plain YAML/JSON values (m, rad; unlimited as None)."""
+        def plain(values):
+            return [None if not math.isfinite(v) else float(v) for v in values]
+
+        return {"L1": self.L1, "Lm": self.Lm, "L2": self.L2, "Lc": self.Lc, "Le": self.Le,
+                "joint_limits": [plain(self._lower), plain(self._upper)]}
+
+    def __repr__(self) -> str:
+        L1, Lm, L2, Lc, Le = self._args
         return f"ContinuumEndoscope(L1={L1}, Lm={Lm}, L2={L2}, Lc={Lc}, Le={Le})"

@@ -1,47 +1,80 @@
-"""The 3-segment multi-backbone continuum robot (MBCR) with insertion of Sarli & Simaan (paper 000).
+"""The multi-backbone continuum robot (MBCR) with insertion of Sarli & Simaan (paper 000), 1 to 4 segments.
 
-Configuration q = [theta1, delta1, theta2, delta2, theta3, delta3, q_ins] (rad, rad, ..., m), with
-Simaan's convention theta = pi/2 straight (paper-notes §1.1). World frame {w}: centred on the robot-channel
-exit, z along the sheath; the base of segment 1 is at [0, 0, q_ins].
+Configuration q = [theta1, delta1, ..., thetan, deltan, q_ins] (rad, rad, ..., m), with Simaan's
+convention theta = pi/2 straight (paper-notes §1.1); the paper's robot has n = 3 segments (7 DoF).
+World frame {w}: centred on the robot-channel exit, z along the sheath; the base of segment 1 is at
+[0, 0, q_ins].
 
-Kinematics follows paper-notes §1.2 (eqs 2-8 corrected): eq (4) uses (g_j - g_3)^ R_{j-1} (paper-notes §1.3 item 1),
-eq (5) is the ordered product (paper-notes §1.3 item 2), eq (7) includes the insertion (paper-notes §1.3 item 3). Near straight the
-chi functions switch to the series of paper-notes §1.4.
+Kinematics follows paper-notes §1.2 (eqs 2-8 corrected): eq (4) uses (g_j - g_n)^ R_{j-1}
+(paper-notes §1.3 item 1), eq (5) is the ordered product (item 2), eq (7) includes the insertion
+(item 3). Near straight the chi functions switch to the series of paper-notes §1.4.
 
-The compiled kernels (``_frames``, ``_tip_kernel``, ``_points_kernel``, ``_backbone_kernel``) are
-public to the package so that baselines and environments can call them inside their own kernels.
+The compiled kernels take the robot's ``kernel_args()`` bundle (``MBCRKernelArgs``) and a
+``MBCRWorkspace`` of scratch arrays, so baselines and environments call them inside their own kernels.
 """
 
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
 
-from continuum_gym.robots.segment import segment_jacobian, segment_position, segment_rotation
-from continuum_gym.robots.validation import as_configuration, positive
+from continuum_gym.robots.segment import (
+    segment_jacobian,
+    segment_position,
+    segment_rotation,
+)
+from continuum_gym.validation import (
+    as_array,
+    as_configuration,
+    fraction,
+    integer,
+    positive,
+)
 
 HALF_PI = 0.5 * math.pi
-DOF = 7
+#: Segment counts a ``MultiBackboneRobot`` supports.
+MIN_SEGMENTS, MAX_SEGMENTS = 1, 4
 
-# Points subject to potential (paper-notes §1.5, paper 000 section V): (segment, arc fraction).
-PAPER_PSPS = (
-    (0, 0.5), (0, 0.75), (0, 1.0),
-    (1, 0.25), (1, 0.5), (1, 0.75), (1, 1.0),
-    (2, 0.25), (2, 0.5), (2, 0.75),
-)
+
+
+def default_psps(n_segments: int) -> tuple:
+    """Points subject to potential, (segment, arc fraction), following the paper's pattern for any n.
+
+    Paper 000 section V (paper-notes §1.5) uses, for its three segments, {0.5, 0.75, 1}, {0.25, 0.5, 0.75, 1}
+    and {0.25, 0.5, 0.75}: quarter points from 0.5 on the first segment and from 0.25 on the others, the
+    end disk of every segment but the last (the tip is tracked, not repelled).
+    """
+    points = []
+    for j in range(n_segments):
+        fractions = [0.5, 0.75] if j == 0 else [0.25, 0.5, 0.75]
+        if j < n_segments - 1:
+            fractions.append(1.0)
+        points += [(j, f) for f in fractions]
+    return tuple(points)
+
+
+#: The paper's 10 points subject to potential (paper-notes §1.5): ``default_psps(3)``.
+PAPER_PSPS = default_psps(3)
+
+#: What the compiled kernels read of a robot: segment lengths (n,) in m, bending stiffness (n,) in
+#: N·m/rad², and the number of samples of the straight inserted part used for VOI.
+MBCRKernelArgs = namedtuple("MBCRKernelArgs", ["lengths", "stiffness", "n_insert"])
+#: Scratch arrays of one robot: base frames R (n+1, 3, 3) and g (n+1, 3) of every segment, a local
+#: position and rotation, one segment's (3, 2) twist columns, and (3, dof) point Jacobians.
+MBCRWorkspace = namedtuple("MBCRWorkspace", ["R_base", "g_base", "p_local", "Q", "jv", "jw", "Jv", "Jw"])
 
 
 @njit(cache=True)
-def make_workspace():
-    """Scratch arrays for one robot: (R_base, g_base, p_local, Q, jv, jw, Jv, Jw).
-
-    Allocated once per batch call so that the per-robot kernels never allocate.
-    """
-    return (np.empty((4, 3, 3)), np.empty((4, 3)), np.empty(3), np.empty((3, 3)),
-            np.empty((3, 2)), np.empty((3, 2)), np.empty((3, 7)), np.empty((3, 7)))
+def make_workspace(n_segments):
+    """Scratch arrays for one robot of ``n_segments``; allocated once per batch call."""
+    dof = 2 * n_segments + 1
+    return MBCRWorkspace(np.empty((n_segments + 1, 3, 3)), np.empty((n_segments + 1, 3)), np.empty(3),
+                         np.empty((3, 3)), np.empty((3, 2)), np.empty((3, 2)), np.empty((3, dof)),
+                         np.empty((3, dof)))
 
 
 @njit(cache=True)
@@ -53,19 +86,20 @@ def all_finite(x):
 
 
 @njit(cache=True)
-def frames(q, lengths, ws):
-    """Fill ws[0][j] = ^wR_j and ws[1][j] = ^wg_j for j = 0..3 (eqs 5, 7 corrected)."""
-    R_base, g_base, p_local, Q = ws[0], ws[1], ws[2], ws[3]
+def frames(q, robot, ws):
+    """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected)."""
+    n = robot.lengths.shape[0]
+    R_base, g_base, p_local, Q = ws.R_base, ws.g_base, ws.p_local, ws.Q
     for a in range(3):
         for b in range(3):
             R_base[0, a, b] = 1.0 if a == b else 0.0
     g_base[0, 0] = 0.0
     g_base[0, 1] = 0.0
-    g_base[0, 2] = q[6]
-    for j in range(3):
+    g_base[0, 2] = q[2 * n]
+    for j in range(n):
         phi = q[2 * j] - HALF_PI
         delta = q[2 * j + 1]
-        segment_position(phi, delta, lengths[j], p_local)
+        segment_position(phi, delta, robot.lengths[j], p_local)
         segment_rotation(phi, delta, Q)
         for a in range(3):
             acc = g_base[j, a]
@@ -80,25 +114,26 @@ def frames(q, lengths, ws):
 
 
 @njit(cache=True)
-def point_columns(q, lengths, ws, segment, sigma, point, Jv, Jw, with_angular):
+def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
     """Columns of the twist of a body point (segment, sigma) at world position ``point``.
 
     Needs ``frames`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
     (g_k - point)^ R_{k-1} J_{k,w} (eq 4 corrected, paper-notes §1.2); own segment evaluated at sigma;
     distal columns 0; insertion column e3. ``Jw`` is filled only when ``with_angular``.
     """
-    R_base, g_base, jv, jw = ws[0], ws[1], ws[4], ws[5]
-    for col in range(7):
+    R_base, g_base, jv, jw = ws.R_base, ws.g_base, ws.jv, ws.jw
+    dof = q.shape[0]
+    for col in range(dof):
         for a in range(3):
             Jv[a, col] = 0.0
             if with_angular:
                 Jw[a, col] = 0.0
-    Jv[2, 6] = 1.0
+    Jv[2, dof - 1] = 1.0
     for k in range(segment + 1):
         phi = q[2 * k] - HALF_PI
         delta = q[2 * k + 1]
         s = sigma if k == segment else 1.0
-        segment_jacobian(phi, delta, lengths[k], s, jv, jw)
+        segment_jacobian(phi, delta, robot.lengths[k], s, jv, jw)
         # Lever arm from the point back to the end of this (whole) proximal segment.
         if k == segment:
             arm0 = 0.0
@@ -133,11 +168,11 @@ def point_columns(q, lengths, ws, segment, sigma, point, Jv, Jw, with_angular):
 
 
 @njit(cache=True)
-def body_point(q, lengths, ws, segment, sigma, out):
+def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
-    R_base, g_base, p_local = ws[0], ws[1], ws[2]
+    R_base, g_base, p_local = ws.R_base, ws.g_base, ws.p_local
     phi = q[2 * segment] - HALF_PI
-    segment_position(sigma * phi, q[2 * segment + 1], sigma * lengths[segment], p_local)
+    segment_position(sigma * phi, q[2 * segment + 1], sigma * robot.lengths[segment], p_local)
     for a in range(3):
         acc = g_base[segment, a]
         for b in range(3):
@@ -146,144 +181,120 @@ def body_point(q, lengths, ws, segment, sigma, out):
 
 
 @njit(cache=True)
-def tip_kernel(q, lengths, ws, p, R, J):
-    """Tip position, rotation and 6x7 Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q."""
-    frames(q, lengths, ws)
-    R_base, g_base, Jv, Jw = ws[0], ws[1], ws[6], ws[7]
+def tip_kernel(q, robot, ws, p, R, J):
+    """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q."""
+    frames(q, robot, ws)
+    n = robot.lengths.shape[0]
+    dof = q.shape[0]
+    R_base, g_base, Jv, Jw = ws.R_base, ws.g_base, ws.Jv, ws.Jw
     for a in range(3):
-        p[a] = g_base[3, a]
+        p[a] = g_base[n, a]
         for b in range(3):
-            R[a, b] = R_base[3, a, b]
-    point_columns(q, lengths, ws, 2, 1.0, p, Jv, Jw, True)
+            R[a, b] = R_base[n, a, b]
+    point_columns(q, robot, ws, n - 1, 1.0, p, Jv, Jw, True)
     for a in range(3):
-        for col in range(7):
+        for col in range(dof):
             J[a, col] = Jv[a, col]
             J[3 + a, col] = Jw[a, col]
 
 
 @njit(cache=True)
-def _tip_single(q, lengths, p, R, J):
-    if not all_finite(q):
-        return False
-    tip_kernel(q, lengths, make_workspace(), p, R, J)
-    return True
-
-
-@njit(cache=True)
-def _tip_batch(qs, lengths, p, R, J):
+def _tip_batch(qs, robot, p, R, J):
     if not all_finite(qs):
         return False
-    ws = make_workspace()
+    ws = make_workspace(robot.lengths.shape[0])
     for i in range(qs.shape[0]):
-        tip_kernel(qs[i], lengths, ws, p[i], R[i], J[i])
+        tip_kernel(qs[i], robot, ws, p[i], R[i], J[i])
     return True
 
 
 @njit(cache=True)
-def points_kernel(q, lengths, ws, segments, fractions, P, JV):
-    """Positions (m, 3) and translational Jacobians (m, 3, 7) of body points, for one q."""
-    frames(q, lengths, ws)
-    dummy = ws[7]
+def points_kernel(q, robot, ws, segments, fractions, P, JV):
+    """Positions (m, 3) and translational Jacobians (m, 3, dof) of body points, for one q."""
+    frames(q, robot, ws)
+    dummy = ws.Jw
     for i in range(segments.shape[0]):
-        body_point(q, lengths, ws, segments[i], fractions[i], P[i])
-        point_columns(q, lengths, ws, segments[i], fractions[i], P[i], JV[i], dummy, False)
+        body_point(q, robot, ws, segments[i], fractions[i], P[i])
+        point_columns(q, robot, ws, segments[i], fractions[i], P[i], JV[i], dummy, False)
 
 
 @njit(cache=True)
-def _points_batch(qs, lengths, segments, fractions, P, JV):
+def _points_batch(qs, robot, segments, fractions, P, JV):
     if not all_finite(qs):
         return False
-    ws = make_workspace()
+    ws = make_workspace(robot.lengths.shape[0])
     for i in range(qs.shape[0]):
-        points_kernel(qs[i], lengths, ws, segments, fractions, P[i], JV[i])
+        points_kernel(qs[i], robot, ws, segments, fractions, P[i], JV[i])
     return True
 
 
 @njit(cache=True)
-def backbone_kernel(q, lengths, ws, n_insert, n_per_segment, out):
+def backbone_kernel(q, robot, ws, n_per_segment, out):
     """Backbone samples from the channel exit (paper-notes §1.3 item 13).
 
-    ``n_insert`` samples from the origin toward [0, 0, q_ins] (the first at the origin, the last one
-    step before the base of segment 1), then arc fractions k/n for k = 0..n on segment 1 and k = 1..n
-    on segments 2 and 3. With q_ins = 0 the inserted samples coincide with the origin, which is
+    ``robot.n_insert`` samples from the origin toward [0, 0, q_ins] (the first at the origin, the last
+    one step before the base of segment 1), then arc fractions k/n for k = 0..n on segment 1 and
+    k = 1..n on the others. With q_ins = 0 the inserted samples coincide with the origin, which is
     outside every cone, so the count stays fixed and batches keep one shape.
     """
-    frames(q, lengths, ws)
+    frames(q, robot, ws)
+    n = robot.lengths.shape[0]
+    n_insert = robot.n_insert
     idx = 0
     for k in range(n_insert):
         out[idx, 0] = 0.0
         out[idx, 1] = 0.0
-        out[idx, 2] = q[6] * k / n_insert
+        out[idx, 2] = q[2 * n] * k / n_insert
         idx += 1
-    for j in range(3):
+    for j in range(n):
         start = 0 if j == 0 else 1
         for k in range(start, n_per_segment + 1):
-            body_point(q, lengths, ws, j, k / n_per_segment, out[idx])
+            body_point(q, robot, ws, j, k / n_per_segment, out[idx])
             idx += 1
 
 
 @njit(cache=True)
-def _backbone_batch(qs, lengths, n_insert, n_per_segment, out):
+def _backbone_batch(qs, robot, n_per_segment, out):
     if not all_finite(qs):
         return False
-    ws = make_workspace()
+    ws = make_workspace(robot.lengths.shape[0])
     for i in range(qs.shape[0]):
-        backbone_kernel(qs[i], lengths, ws, n_insert, n_per_segment, out[i])
+        backbone_kernel(qs[i], robot, ws, n_per_segment, out[i])
     return True
 
 
-def _as_q(q):
-    """Float64, C-contiguous (..., 7) view of q; finiteness is checked inside the kernels."""
-    try:
-        q = np.asarray(q, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"q must be a numeric array of shape (..., {DOF}); got {q!r}") from error
-    if q.ndim == 0 or q.shape[-1] != DOF:
-        raise ValueError(f"q must have shape (..., {DOF}); got shape {q.shape}")
-    return np.ascontiguousarray(q)
+def backbone_sample_count(n_per_segment: int, n_insert: int = 5, n_segments: int = 3) -> int:
+    """Number of samples ``MultiBackboneRobot.backbone`` returns."""
+    return n_insert + n_segments * n_per_segment + 1
 
 
-def _raise_not_finite(q):
+def _raise_not_finite(q) -> None:
     raise ValueError(f"q must be finite (no NaN or inf); got {q}")
 
 
-def tip_pose_jacobian(q, lengths):
-    """(p, R, J) of the tip for q of shape (..., 7) with segment ``lengths`` (m) as a float64 array."""
-    q = _as_q(q)
-    if q.ndim == 1:
-        p = np.empty(3)
-        R = np.empty((3, 3))
-        J = np.empty((6, 7))
-        if not _tip_single(q, lengths, p, R, J):
-            _raise_not_finite(q)
-        return p, R, J
-    batch = q.shape[:-1]
-    flat = q.reshape(-1, DOF)
-    n = flat.shape[0]
-    p = np.empty((n, 3))
-    R = np.empty((n, 3, 3))
-    J = np.empty((n, 6, 7))
-    if not _tip_batch(flat, lengths, p, R, J):
-        _raise_not_finite(q)
-    return p.reshape(batch + (3,)), R.reshape(batch + (3, 3)), J.reshape(batch + (6, 7))
-
-
-def backbone_sample_count(n_per_segment: int, n_insert: int = 5) -> int:
-    """Number of samples ``MultiBackboneRobot.backbone`` returns."""
-    return n_insert + 3 * n_per_segment + 1
+def _three_segment_constant(values) -> np.ndarray:
+    array = np.array(values)
+    array.flags.writeable = False
+    return array
 
 
 @dataclass(frozen=True)
 class MultiBackboneRobot:
-    """Three-segment multi-backbone continuum robot with insertion (Sarli & Simaan, paper 000).
+    """Multi-backbone continuum robot with insertion (Sarli & Simaan, paper 000): 1 to 4 segments.
 
     Args:
-        lengths: segment arc lengths (m), Table I: (26, 20, 19) mm.
+        lengths: segment arc lengths (m), one per segment; 1 to 4 segments. Default: the paper's
+            three, Table I: (26, 20, 19) mm.
         youngs_modulus: backbone Young's modulus (Pa); NiTi 60 GPa (paper-notes §1.5 assumption).
         primary_diameter: primary backbone diameter (m), 0.6 mm (paper-notes §1.5).
         secondary_diameter: secondary backbone diameter (m), 0.4 mm (paper-notes §1.5).
         n_secondary: secondary backbones per segment (3).
-        n_insert_samples: samples of the straight inserted part used by ``backbone`` (paper-notes §1.3 item 13: 5).
+        n_insert_samples: samples of the straight inserted part used by ``backbone`` (paper-notes §1.3
+            item 13: 5).
+        backbone_stiffness: bending stiffness per segment (N·m/rad²), overriding the value computed from
+            the backbones (``None``: K_i = (E_p I_p + n_s E_s I_s) / l_i, paper-notes §1.3 item 9).
+
+    ``q = [theta1, delta1, ..., thetan, deltan, q_ins]``; ``dof == 2 n + 1``.
     """
 
     lengths: tuple = (0.026, 0.020, 0.019)
@@ -292,148 +303,212 @@ class MultiBackboneRobot:
     secondary_diameter: float = 0.4e-3
     n_secondary: int = 3
     n_insert_samples: int = 5
-    _lengths_array: np.ndarray = field(init=False, repr=False, compare=False)
+    backbone_stiffness: tuple | None = None
+    _arrays: tuple = field(init=False, repr=False, compare=False)
 
-    dof = DOF
-    #: All segments straight, no insertion.
-    straight = np.array([HALF_PI, 0.0, HALF_PI, 0.0, HALF_PI, 0.0, 0.0])
-    #: Task (a) start configuration psi_a of paper-notes §1.5 (VOI 0.25 at gamma = 0).
-    psi_a = np.array([0.981411417978988, -2.1391814000492557, 1.4343256703283846,
-                      -0.484339338133009, 1.1014459391296132, -2.285467909847507,
-                      0.009283887491045915])
-    #: Task (b) (circle) start configuration psi_b of paper-notes §1.5.
-    psi_b = np.array([1.1571463096352517, -2.7733740222436865, 1.3778194554049983, 2.704865019865162,
-                      1.5026076079767348, 1.031851192490949, 0.002099818575749484])
-    home = psi_a
+    #: Task (a) start configuration psi_a of paper-notes §1.5 (3 segments; VOI 0.25 at gamma = 0).
+    psi_a = _three_segment_constant([0.981411417978988, -2.1391814000492557, 1.4343256703283846,
+                                     -0.484339338133009, 1.1014459391296132, -2.285467909847507,
+                                     0.009283887491045915])
+    #: Task (b) (circle) start configuration psi_b of paper-notes §1.5 (3 segments).
+    psi_b = _three_segment_constant([1.1571463096352517, -2.7733740222436865, 1.3778194554049983,
+                                     2.704865019865162, 1.5026076079767348, 1.031851192490949,
+                                     0.002099818575749484])
 
-    def __post_init__(self):
-        lengths = tuple(float(x) for x in np.asarray(self.lengths, dtype=float).reshape(-1))
-        if len(lengths) != 3:
-            raise ValueError(f"lengths must hold 3 segment lengths (m); got {self.lengths!r}")
-        for i, value in enumerate(lengths):
-            positive(value, f"lengths[{i}]", "m")
+    def __post_init__(self) -> None:
+        values = np.asarray(self.lengths, dtype=float).reshape(-1) if not isinstance(self.lengths, str) else None
+        if values is None or not (MIN_SEGMENTS <= values.size <= MAX_SEGMENTS):
+            raise ValueError(f"lengths must hold {MIN_SEGMENTS} to {MAX_SEGMENTS} segment lengths (m); "
+                             f"got {self.lengths!r}")
+        lengths = tuple(positive(value, f"lengths[{i}]", "m") for i, value in enumerate(values))
         positive(self.youngs_modulus, "youngs_modulus", "Pa")
         positive(self.primary_diameter, "primary_diameter", "m")
         positive(self.secondary_diameter, "secondary_diameter", "m")
-        if int(self.n_secondary) != self.n_secondary or self.n_secondary < 0:
-            raise ValueError(f"n_secondary must be an integer >= 0; got {self.n_secondary!r}")
-        if int(self.n_insert_samples) != self.n_insert_samples or self.n_insert_samples < 1:
-            raise ValueError(f"n_insert_samples must be an integer >= 1; got {self.n_insert_samples!r}")
+        integer(self.n_secondary, "n_secondary", low=0)
+        integer(self.n_insert_samples, "n_insert_samples", low=1)
         object.__setattr__(self, "lengths", lengths)
-        object.__setattr__(self, "_lengths_array", np.array(lengths))
+        lengths_array = np.array(lengths)
+        if self.backbone_stiffness is None:
+            inertia_primary = math.pi * self.primary_diameter**4 / 64.0
+            inertia_secondary = math.pi * self.secondary_diameter**4 / 64.0
+            flexural = self.youngs_modulus * (inertia_primary + self.n_secondary * inertia_secondary)
+            stiffness = flexural / lengths_array
+        else:
+            given = as_array(self.backbone_stiffness, "backbone_stiffness").reshape(-1)
+            if given.size != len(lengths):
+                raise ValueError(f"backbone_stiffness must hold one value per segment ({len(lengths)}; N·m/rad²); "
+                                 f"got {self.backbone_stiffness!r}")
+            stiffness = np.array([positive(k, f"backbone_stiffness[{i}]", "N·m/rad²") for i, k in enumerate(given)])
+            object.__setattr__(self, "stiffness_override", tuple(float(k) for k in stiffness))
+        for array in (lengths_array, stiffness):
+            array.flags.writeable = False
+        object.__setattr__(self, "_arrays", (lengths_array, stiffness))
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def n_segments(self) -> int:
+        """Number of bending segments n."""
+        return len(self.lengths)
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom, 2 n + 1."""
+        return 2 * len(self.lengths) + 1
+
+    @property
+    def joint_names(self) -> tuple:
+        """("theta1", "delta1", ..., "thetan", "deltan", "q_ins")."""
+        names = []
+        for j in range(1, self.n_segments + 1):
+            names += [f"theta{j}", f"delta{j}"]
+        return (*names, "q_ins")
+
+    @property
+    def straight(self) -> np.ndarray:
+        """All segments straight, no insertion (a fresh array)."""
+        q = np.zeros(self.dof)
+        q[0:-1:2] = HALF_PI
+        return q
+
+    @property
+    def home(self) -> np.ndarray:
+        """psi_a for the paper's three segments; otherwise every segment bent by 0.3 rad, 5 mm inserted."""
+        if self.n_segments == 3:
+            return self.psi_a.copy()
+        q = self.straight
+        q[0:-1:2] -= 0.3
+        q[-1] = 0.005
+        return q
+
+    def kernel_args(self) -> MBCRKernelArgs:
+        """The bundle the compiled kernels read: lengths (m), stiffness (N·m/rad²), inserted samples."""
+        lengths, stiffness = self._arrays
+        return MBCRKernelArgs(lengths, stiffness, int(self.n_insert_samples))
+
+    def as_configuration(self, q, name: str = "q") -> np.ndarray:
+        """``q`` as a float64, C-contiguous (..., dof) array (finiteness is checked in the kernels)."""
+        return np.ascontiguousarray(as_array(q, name, (self.dof,)))
+
+    def point_spec(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(segments (m,) int, fractions (m,)) of (segment, arc fraction) pairs; both validated."""
+        points = list(points)
+        if not points:
+            raise ValueError("points must hold at least one (segment, fraction) pair")
+        segments = np.empty(len(points), dtype=np.int64)
+        fractions = np.empty(len(points))
+        for i, pair in enumerate(points):
+            try:
+                segment, value = pair
+            except (TypeError, ValueError):
+                raise ValueError(f"points[{i}] must be a (segment, fraction) pair; got {pair!r}") from None
+            segments[i] = integer(segment, f"points[{i}] segment (0-based)", low=0, high=self.n_segments - 1)
+            fractions[i] = fraction(value, f"points[{i}] fraction", allow_zero=True)
+        return segments, fractions
 
     # ------------------------------------------------------------------ kinematics
-    def forward_kinematics(self, q):
-        """Tip pose in {w}: eqs (5)-(8) corrected (paper-notes §1.2, paper-notes §1.3 items 2-3).
+    def _flat(self, q):
+        q = self.as_configuration(q)
+        if q.ndim == 0:
+            raise ValueError(f"q must have shape (..., {self.dof}); got a scalar")
+        return q, q.shape[:-1], q.reshape(-1, self.dof)
+
+    def forward_kinematics_and_jacobian(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(p, R, J) from one kernel call; shapes (..., 3) in m, (..., 3, 3), (..., 6, dof)."""
+        q, batch, flat = self._flat(q)
+        n = flat.shape[0]
+        p = np.empty((n, 3))
+        R = np.empty((n, 3, 3))
+        J = np.empty((n, 6, self.dof))
+        if not _tip_batch(flat, self.kernel_args(), p, R, J):
+            _raise_not_finite(q)
+        return p.reshape(batch + (3,)), R.reshape(batch + (3, 3)), J.reshape(batch + (6, self.dof))
+
+    def forward_kinematics(self, q) -> tuple[np.ndarray, np.ndarray]:
+        """Tip pose in {w}: eqs (5)-(8) corrected (paper-notes §1.2, §1.3 items 2-3).
 
         Args:
-            q: configuration(s), shape (..., 7): rad for angles, m for q_ins.
+            q: configuration(s), shape (..., dof): rad for angles, m for q_ins.
 
         Returns:
             (p, R): tip position (..., 3) in m and rotation (..., 3, 3).
         """
-        p, R, _ = tip_pose_jacobian(q, self._lengths_array)
+        p, R, _ = self.forward_kinematics_and_jacobian(q)
         return p, R
 
-    def jacobian(self, q):
-        """6x7 Jacobian of the tip twist [v; w] in {w} (eq 2, eq 4 corrected per paper-notes §1.3 item 1).
+    def jacobian(self, q) -> np.ndarray:
+        """6 x dof Jacobian of the tip twist [v; w] in {w} (eq 2, eq 4 corrected per paper-notes §1.3 item 1).
 
-        v is the velocity of the tip point g_3 (m/s per rad/s, and per m/s for q_ins).
-        Returns shape (..., 6, 7).
+        v is the velocity of the tip point (m/s per rad/s, and per m/s for q_ins). Shape (..., 6, dof).
         """
-        return tip_pose_jacobian(q, self._lengths_array)[2]
+        return self.forward_kinematics_and_jacobian(q)[2]
 
-    def forward_kinematics_and_jacobian(self, q):
-        """(p, R, J) from one kernel call; shapes (..., 3) in m, (..., 3, 3), (..., 6, 7)."""
-        return tip_pose_jacobian(q, self._lengths_array)
-
-    def point_jacobian(self, q, segment, fraction):
-        """Position and translational Jacobian of a backbone point (eq 11; paper-notes §1.2).
+    def point_jacobian(self, q, segment: int, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position (..., 3) in m and translational Jacobian (..., 3, dof) of one backbone point (eq 11).
 
         Args:
-            q: configuration(s), shape (..., 7).
-            segment: 0-based segment index (0, 1 or 2).
+            q: configuration(s), shape (..., dof).
+            segment: 0-based segment index.
             fraction: arc fraction in [0, 1] of that segment.
-
-        Returns:
-            (p, Jv): (..., 3) in m and (..., 3, 7).
         """
         P, JV = self.points_jacobians(q, [(segment, fraction)])
         return P[..., 0, :], JV[..., 0, :, :]
 
-    def points_jacobians(self, q, points=PAPER_PSPS):
-        """Positions (..., m, 3) in m and Jacobians (..., m, 3, 7) of body points (segment, fraction)."""
-        segments, fractions = self._point_spec(points)
-        q = _as_q(q)
-        batch = q.shape[:-1]
-        flat = q.reshape(-1, DOF)
+    def points_jacobians(self, q, points=PAPER_PSPS) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (..., m, 3) in m and Jacobians (..., m, 3, dof) of body points (segment, fraction)."""
+        segments, fractions = self.point_spec(points)
+        q, batch, flat = self._flat(q)
         m = segments.shape[0]
         P = np.empty((flat.shape[0], m, 3))
-        JV = np.empty((flat.shape[0], m, 3, 7))
-        if not _points_batch(flat, self._lengths_array, segments, fractions, P, JV):
+        JV = np.empty((flat.shape[0], m, 3, self.dof))
+        if not _points_batch(flat, self.kernel_args(), segments, fractions, P, JV):
             _raise_not_finite(q)
-        return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, 7))
+        return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, self.dof))
 
-    def backbone(self, q, n_per_segment: int = 40):
+    def backbone(self, q, n_per_segment: int = 40) -> np.ndarray:
         """Sampled backbone from the channel exit, as paper-notes §1.3 item 13 samples it for VOI.
 
         The straight inserted part from the origin toward [0, 0, q_ins] (``n_insert_samples`` samples),
         then arc fractions k/n_per_segment on each segment (segment 1 from k = 0). Returns
-        (..., n_insert_samples + 3 n_per_segment + 1, 3) in m; the last sample is the tip.
+        (..., n_insert_samples + n n_per_segment + 1, 3) in m; the last sample is the tip.
         """
-        if int(n_per_segment) != n_per_segment or n_per_segment < 1:
-            raise ValueError(f"n_per_segment must be an integer >= 1; got {n_per_segment!r}")
-        q = _as_q(q)
-        batch = q.shape[:-1]
-        flat = q.reshape(-1, DOF)
-        m = backbone_sample_count(int(n_per_segment), int(self.n_insert_samples))
+        n_per_segment = integer(n_per_segment, "n_per_segment", low=1)
+        q, batch, flat = self._flat(q)
+        m = backbone_sample_count(n_per_segment, int(self.n_insert_samples), self.n_segments)
         out = np.empty((flat.shape[0], m, 3))
-        if not _backbone_batch(flat, self._lengths_array, int(self.n_insert_samples), int(n_per_segment), out):
+        if not _backbone_batch(flat, self.kernel_args(), n_per_segment, out):
             _raise_not_finite(q)
         return out.reshape(batch + (m, 3))
 
     # ------------------------------------------------------------------ elastic energy
     @property
     def stiffness(self) -> np.ndarray:
-        """Bending stiffness K_i = (E_p I_p + n_s E_s I_s)/l_i per segment (N·m/rad²), paper-notes §1.3 item 9."""
-        inertia_primary = math.pi * self.primary_diameter**4 / 64.0
-        inertia_secondary = math.pi * self.secondary_diameter**4 / 64.0
-        flexural = self.youngs_modulus * (inertia_primary + self.n_secondary * inertia_secondary)
-        return flexural / self._lengths_array
+        """Bending stiffness K_i per segment (N·m/rad²): (E_p I_p + n_s E_s I_s)/l_i (paper-notes §1.3 item 9)
+        unless given."""
+        return self._arrays[1]
 
-    def elastic_energy(self, q):
+    def elastic_energy(self, q) -> np.ndarray:
         """Elastic energy E = sum K_i/2 (pi/2 - theta_i)^2 (eq 10 with l_ij = l_i), in J; shape q.shape[:-1]."""
-        q = as_configuration(q, DOF)
-        bend = HALF_PI - q[..., 0:6:2]
+        bend = self.bend_angles(q)
         return 0.5 * np.sum(self.stiffness * bend**2, axis=-1)
 
-    def elastic_energy_gradient(self, q):
-        """dE/dq, shape (..., 7): theta entries -K_i (pi/2 - theta_i), others 0 (paper-notes §1.3 item 9)."""
-        q = as_configuration(q, DOF)
+    def elastic_energy_gradient(self, q) -> np.ndarray:
+        """dE/dq, shape (..., dof): theta entries -K_i (pi/2 - theta_i), others 0 (paper-notes §1.3 item 9)."""
+        q = as_configuration(q, self.dof)
         grad = np.zeros_like(q)
-        grad[..., 0:6:2] = -self.stiffness * (HALF_PI - q[..., 0:6:2])
+        grad[..., 0:-1:2] = -self.stiffness * (HALF_PI - q[..., 0:-1:2])
         return grad
 
-    # ------------------------------------------------------------------ helpers
-    @staticmethod
-    def bend_angles(q):
-        """Bend angles pi/2 - theta_j (rad) of the three segments, shape (..., 3); 0 is straight."""
-        q = as_configuration(q, DOF)
-        return HALF_PI - q[..., 0:6:2]
+    def bend_angles(self, q) -> np.ndarray:
+        """Bend angles pi/2 - theta_j (rad) of the segments, shape (..., n); 0 is straight."""
+        q = as_configuration(q, self.dof)
+        return HALF_PI - q[..., 0:-1:2]
 
-    @staticmethod
-    def _point_spec(points):
-        points = list(points)
-        if not points:
-            raise ValueError("points must hold at least one (segment, fraction) pair")
-        segments = np.empty(len(points), dtype=np.int64)
-        fractions = np.empty(len(points))
-        for i, (segment, fraction) in enumerate(points):
-            if segment not in (0, 1, 2):
-                raise ValueError(f"segment must be 0, 1 or 2 (0-based); got {segment!r}")
-            fraction = float(fraction)
-            if not (0.0 <= fraction <= 1.0):
-                raise ValueError(f"fraction must be in [0, 1]; got {fraction!r}")
-            segments[i] = segment
-            fractions[i] = fraction
-        return segments, fractions
+    def to_dict(self) -> dict:
+        """The constructor arguments as plain YAML/JSON values."""
+        out = {"lengths": list(self.lengths), "youngs_modulus": self.youngs_modulus,
+               "primary_diameter": self.primary_diameter, "secondary_diameter": self.secondary_diameter,
+               "n_secondary": int(self.n_secondary), "n_insert_samples": int(self.n_insert_samples)}
+        if self.backbone_stiffness is not None:
+            out["backbone_stiffness"] = list(self.backbone_stiffness)
+        return out
+

@@ -1,4 +1,4 @@
-"""Rotation helpers as compiled kernels: rotation vectors (log map) and small dense solves."""
+"""Rotations as compiled kernels: the log map (rotation vectors), the exponential map and orientation errors."""
 
 from __future__ import annotations
 
@@ -6,6 +6,11 @@ import math
 
 import numpy as np
 from numba import njit
+
+from continuum_gym.validation import as_rotations, describe
+
+#: Tolerance of the orthogonality check of ``rotation_vector``'s input.
+ROTATION_TOL = 1e-6
 
 
 @njit(cache=True)
@@ -90,46 +95,23 @@ def orientation_error(R_des, R, work, out):
 
 
 @njit(cache=True)
-def cholesky_solve_inplace(A, B):
-    """Solve A X = B for symmetric positive-definite A (n x n) and B (n x m); B becomes X, A its factor.
-
-    Small dense systems (6 x 6 damped Gram matrices) are faster here than a LAPACK call.
-    Returns False if A is not numerically positive definite.
-    """
-    n = A.shape[0]
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= A[j, k] * A[j, k]
-        if s <= 0.0:
-            return False
-        ljj = math.sqrt(s)
-        A[j, j] = ljj
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= A[i, k] * A[j, k]
-            A[i, j] = s / ljj
-    m = B.shape[1]
-    for col in range(m):
-        for i in range(n):
-            s = B[i, col]
-            for k in range(i):
-                s -= A[i, k] * B[k, col]
-            B[i, col] = s / A[i, i]
-        for i in range(n - 1, -1, -1):
-            s = B[i, col]
-            for k in range(i + 1, n):
-                s -= A[k, i] * B[k, col]
-            B[i, col] = s / A[i, i]
-    return True
+def _log_batch(flat, out):
+    for i in range(flat.shape[0]):
+        rotation_log(flat[i], out[i])
 
 
 def rotation_vector(R) -> np.ndarray:
-    """Batched log map: rotation vectors (..., 3) in rad of rotations (..., 3, 3)."""
-    R = np.asarray(R, dtype=np.float64)
+    """Batched log map: rotation vectors (..., 3) in rad of rotations (..., 3, 3).
+
+    ``R`` must be finite; each matrix is read as a rotation (its nearest quaternion), so pass proper
+    rotations: the result of a non-orthogonal matrix is not meaningful.
+    """
+    R = as_rotations(R, "R")
     flat = np.ascontiguousarray(R.reshape(-1, 3, 3))
+    gram = np.einsum("nji,njk->nik", flat, flat) - np.eye(3)
+    if flat.size and (np.max(np.abs(gram)) > ROTATION_TOL or np.min(np.linalg.det(flat)) <= 0.0):
+        raise ValueError(f"R must hold rotation matrices (max |R^T R - I| <= {ROTATION_TOL:g}, det R > 0); "
+                         f"got {describe(R)}")
     out = np.empty((flat.shape[0], 3))
-    for i in range(flat.shape[0]):
-        rotation_log(flat[i], out[i])
+    _log_batch(flat, out)
     return out.reshape(R.shape[:-2] + (3,))

@@ -15,6 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
+from continuum_gym.validation import as_finite, positive
+
 # Below this |phi| the closed forms lose digits to cancellation; the series error at the switch is < 1e-11.
 SERIES_SWITCH = 2e-3
 
@@ -103,23 +105,140 @@ def segment_jacobian(phi, delta, length, sigma, jv, jw):
     jw[2, 1] = cp - 1.0
 
 
-def segment_tip_pose(phi, delta, length):
+# Xu's convention (theta = -phi, 0 straight): the terms of eqs (3)-(6) of paper 001.
+@njit(cache=True, inline="always")
+def bend_terms(theta):
+    """Return ``s, omc, a, b, da, db`` of a bending angle ``theta`` (rad).
+
+    ``s = sin(theta)``, ``omc = 1 - cos(theta)`` (via the half angle, no cancellation),
+    ``a = (1 - cos)/theta``, ``b = sin/theta`` and their derivatives ``da``, ``db`` in theta.
+    Below ``SERIES_SWITCH`` the series of paper-notes §2.2 are used, so all are exact and finite
+    at theta = 0.
+    """
+    sh = math.sin(0.5 * theta)
+    ch = math.cos(0.5 * theta)
+    s = 2.0 * sh * ch
+    omc = 2.0 * sh * sh
+    if abs(theta) < SERIES_SWITCH:
+        t2 = theta * theta
+        a = theta * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0))
+        b = 1.0 - t2 * (1.0 / 6.0 - t2 / 120.0)
+        da = 0.5 - t2 * (1.0 / 8.0 - t2 / 144.0)
+        db = -theta * (1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 / 840.0))
+    else:
+        a = omc / theta
+        b = s / theta
+        da = (s - a) / theta  # sin/theta - (1 - cos)/theta^2
+        db = (1.0 - omc - b) / theta  # cos/theta - sin/theta^2
+    return s, omc, a, b, da, db
+
+
+@njit(cache=True, inline="always")
+def bend_rotation(s, omc, cd, sd, R):
+    """Write ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (eq 4 corrected, paper-notes §2.3 item 2) into R."""
+    R[0, 0] = 1.0 - omc * cd * cd
+    R[0, 1] = omc * cd * sd
+    R[0, 2] = s * cd
+    R[1, 0] = omc * cd * sd
+    R[1, 1] = 1.0 - omc * sd * sd
+    R[1, 2] = -s * sd
+    R[2, 0] = -s * cd
+    R[2, 1] = s * sd
+    R[2, 2] = 1.0 - omc
+
+
+def segment_tip_pose(phi, delta, length: float) -> tuple[np.ndarray, np.ndarray]:
     """Batched end-disk pose of one segment in its base frame.
 
     Args:
         phi: bend variable (rad), any shape; 0 is straight.
-        delta: bending-plane angle (rad), same shape.
-        length: arc length (m).
+        delta: bending-plane angle (rad), broadcasts with ``phi``.
+        length: arc length (m), > 0.
 
     Returns:
-        (p, R) with shapes (..., 3) and (..., 3, 3).
+        (p, R) with shapes (..., 3) in m and (..., 3, 3).
     """
-    phi, delta = np.broadcast_arrays(np.asarray(phi, dtype=float), np.asarray(delta, dtype=float))
+    length = positive(length, "length", "m")
+    phi = as_finite(phi, (), "phi")
+    delta = as_finite(delta, (), "delta")
+    try:
+        phi, delta = np.broadcast_arrays(phi, delta)
+    except ValueError:
+        raise ValueError(f"phi of shape {phi.shape} and delta of shape {delta.shape} do not broadcast") from None
     flat_phi = phi.reshape(-1)
     flat_delta = delta.reshape(-1)
     p = np.empty((flat_phi.size, 3))
     R = np.empty((flat_phi.size, 3, 3))
     for i in range(flat_phi.size):
-        segment_position(flat_phi[i], flat_delta[i], float(length), p[i])
+        segment_position(flat_phi[i], flat_delta[i], length, p[i])
         segment_rotation(flat_phi[i], flat_delta[i], R[i])
     return p.reshape(phi.shape + (3,)), R.reshape(phi.shape + (3, 3))
+
+
+@njit(cache=True)
+def _segment_batch(theta, delta, length, with_jacobian, out):
+    """Pose (n, 12: p then R row-major) or Jacobian (n, 12: rows [J_tv; J_tw], columns theta, delta)."""
+    R = np.empty((3, 3))
+    for i in range(theta.shape[0]):
+        s, omc, a, b, da, db = bend_terms(theta[i])
+        cd = math.cos(delta[i])
+        sd = math.sin(delta[i])
+        o = out[i]
+        if with_jacobian:
+            o[0] = length * cd * da
+            o[1] = -length * sd * a
+            o[2] = -length * sd * da
+            o[3] = -length * cd * a
+            o[4] = length * db
+            o[5] = 0.0
+            o[6] = sd
+            o[7] = cd * s
+            o[8] = cd
+            o[9] = -sd * s
+            o[10] = 0.0
+            o[11] = -omc
+        else:
+            o[0] = length * cd * a
+            o[1] = -length * sd * a
+            o[2] = length * b
+            bend_rotation(s, omc, cd, sd, R)
+            for a_ in range(3):
+                for b_ in range(3):
+                    o[3 + 3 * a_ + b_] = R[a_, b_]
+
+
+def _segment_inputs(theta, delta, length):
+    length = positive(length, "length", "m")
+    theta = as_finite(theta, (), "theta")
+    delta = as_finite(delta, (), "delta")
+    try:
+        theta, delta = np.broadcast_arrays(theta, delta)
+    except ValueError:
+        raise ValueError(f"theta of shape {theta.shape} and delta of shape {delta.shape} do not broadcast") from None
+    return (np.ascontiguousarray(theta.reshape(-1)), np.ascontiguousarray(delta.reshape(-1)), length,
+            theta.shape)
+
+
+def endoscope_segment_pose(theta, delta, length: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of {te} in {tb} of one constant-curvature segment (eqs 3 and 4, paper-notes §2.3 item 2).
+
+    ``theta`` (rad, 0 = straight), ``delta`` (rad) broadcast together; ``length`` in m.
+    Returns ``tb_p_te`` (..., 3) in m and ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (..., 3, 3).
+    Exact and finite at theta = 0 (series of paper-notes §2.2 below ``SERIES_THRESHOLD``).
+    """
+    theta, delta, length, shape = _segment_inputs(theta, delta, length)
+    out = np.empty((theta.shape[0], 12))
+    _segment_batch(theta, delta, length, False, out)
+    return out[:, :3].reshape(shape + (3,)), out[:, 3:].reshape(shape + (3, 3))
+
+
+def endoscope_segment_jacobian(theta, delta, length: float) -> np.ndarray:
+    """Twist Jacobian of {te}'s origin in {tb} per [theta, delta] rate (eqs 5 and 6, as printed).
+
+    Returns (..., 6, 2): rows [J_tv (m/rad); J_tw (rad/rad)], columns theta, delta. ``length`` in m.
+    Below ``SERIES_THRESHOLD`` uses the series of paper-notes §2.2 (exact and finite at theta = 0).
+    """
+    theta, delta, length, shape = _segment_inputs(theta, delta, length)
+    out = np.empty((theta.shape[0], 12))
+    _segment_batch(theta, delta, length, True, out)
+    return out.reshape(shape + (6, 2))

@@ -1,0 +1,300 @@
+"""Typed, frozen configurations of the environments: built and validated in one place.
+
+``OcclusionConfig`` and ``ViewTrackingConfig`` hold everything that defines an environment: robot,
+endoscope (cone / da Vinci), limits, task, baseline, residual, reward weights and timing. Users keep
+passing the flat keyword arguments of ``gym.make(id, **kwargs)`` (and rl-zoo's ``env_kwargs``); the
+env builds its config from them with ``from_kwargs``, which validates every value once and says which
+parameter is wrong and what is valid. ``to_dict`` writes plain YAML values (each training run's
+``config.yml``), ``from_dict`` reads them back (``continuum-gym evaluate``), and ``arguments_table``
+is the docstring's Arguments table (name, type, default, unit, meaning).
+
+A config may also be passed whole: ``gym.make(id, config=OcclusionConfig(task="random"))``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
+
+from continuum_gym.validation import (
+    boolean,
+    choice,
+    closest,
+    describe,
+    fraction,
+    integer,
+    number,
+    weights,
+)
+
+TASK_SPLITS = ("train", "test")
+#: Task families of each environment (the papers' fixed tasks exist only in the test split).
+OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
+OCCLUSION_TEST_ONLY = ("circle",)
+VIEW_TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
+VIEW_TEST_ONLY = ("case1", "case2", "coverage")
+
+#: Largest control step (s): every task lasts at least 1.5 s, so an episode has at least 15 steps.
+MAX_CONTROL_DT = 0.1
+MAX_SUBSTEPS = 1000
+MAX_RESIDUAL_SCALE = 10.0
+#: Reward weights are scale factors of terms of order 1; beyond this the reward overflows to inf.
+MAX_REWARD_WEIGHT = 1e6
+MAX_GRID = 401
+
+
+def spec(unit: str = "", doc: str = "", type_name: str = "") -> dict:
+    """Field metadata read by ``arguments_table``."""
+    return {"unit": unit, "doc": doc, "type": type_name}
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+        return f.default_factory()  # type: ignore[misc]
+    return None
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """What both configurations share: the keyword interface, serialisation and the Arguments table."""
+
+    #: Gymnasium id the configuration belongs to (set by subclasses).
+    env_id: ClassVar[str] = ""
+    #: Keyword arguments accepted for backward compatibility that must stay at None here.
+    foreign_keywords: ClassVar[tuple] = ()
+
+    @classmethod
+    def keyword_names(cls) -> tuple:
+        return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def from_kwargs(cls, **kwargs: Any) -> EnvConfig:
+        """Build from the keyword arguments of ``gym.make``; unknown names raise ``ValueError``."""
+        names = cls.keyword_names()
+        for key in list(kwargs):
+            if key in cls.foreign_keywords:
+                if kwargs.pop(key) is not None:
+                    raise ValueError(f"{key} applies to another environment, not {cls.env_id}; valid arguments: "
+                                     f"{sorted(names)}")
+            elif key not in names:
+                raise ValueError(f"{cls.env_id} has no argument {key!r}{closest(key, names)}; valid arguments: "
+                                 f"{sorted(names)}")
+        return cls(**kwargs)
+
+    def replace(self, **changes: Any) -> EnvConfig:
+        """A copy with ``changes`` applied (validated again)."""
+        return type(self).from_kwargs(**{**self.as_kwargs(), **changes})
+
+    def as_kwargs(self) -> dict:
+        """The field values as keyword arguments (objects, not serialised)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def to_dict(self) -> dict:
+        """Plain YAML/JSON values of every field (objects as their ``to_dict()`` with a ``type`` key)."""
+        out = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if hasattr(value, "to_dict"):
+                value = {"type": type(value).__name__, **value.to_dict()}
+            elif isinstance(value, tuple):
+                value = list(value)
+            elif isinstance(value, dict):
+                value = dict(value)
+            out[f.name] = value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> EnvConfig:
+        """Inverse of ``to_dict`` (objects are rebuilt from their dicts)."""
+        if not isinstance(data, dict):
+            raise ValueError(f"an env config must be a mapping of argument -> value; got {describe(data)}")
+        kwargs = {}
+        for key, value in data.items():
+            if isinstance(value, dict) and "type" in value:
+                value = cls._build_object(key, dict(value))
+            kwargs[key] = value
+        return cls.from_kwargs(**kwargs)
+
+    @classmethod
+    def _build_object(cls, key: str, value: dict) -> Any:
+        raise ValueError(f"{cls.env_id}: argument {key!r} does not take an object")
+
+    @classmethod
+    def arguments_table(cls) -> str:
+        """Markdown table of the keyword arguments: name, type, default, unit, meaning."""
+        rows = ["| Argument | Type | Default | Unit | Meaning |", "|---|---|---|---|---|"]
+        for f in fields(cls):
+            meta = f.metadata
+            default = _default(f)
+            shown = "paper's" if default is None and f.name in ("robot", "cone", "davinci") else repr(default)
+            rows.append(f"| `{f.name}` | {meta.get('type') or f.type} | `{shown}` | {meta.get('unit', '') or '-'} | "
+                        f"{meta.get('doc', '')} |")
+        return "\n".join(rows)
+
+
+def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
+    from continuum_gym.envs.spec import ENV_SPECS
+
+    set_ = object.__setattr__
+    choice(config.task, tasks, "task")
+    choice(config.task_split, TASK_SPLITS, "task_split")
+    if config.task in test_only and config.task_split != "test":
+        raise ValueError(f"task={config.task!r} is a fixed evaluation task of the paper: use task_split='test' "
+                         f"(training draws from {[t for t in tasks if t not in test_only]})")
+    if config.base_controller is not None:
+        choice(config.base_controller, ENV_SPECS[config.env_id].baselines, "base_controller")
+    set_(config, "residual_scale", number(config.residual_scale, "residual_scale", low=0.0, high=MAX_RESIDUAL_SCALE,
+                                          low_open=True, unit="fraction of the action scale"))
+    set_(config, "control_dt", number(config.control_dt, "control_dt", low=0.0, high=MAX_CONTROL_DT, low_open=True,
+                                      unit="s"))
+    set_(config, "substeps", integer(config.substeps, "substeps", low=1, high=MAX_SUBSTEPS))
+    if config.max_episode_steps is not None:
+        set_(config, "max_episode_steps", integer(config.max_episode_steps, "max_episode_steps", low=1))
+
+
+@dataclass(frozen=True)
+class OcclusionConfig(EnvConfig):
+    """Configuration of ``ContinuumGym/OcclusionAvoidance-v0`` (SI units)."""
+
+    env_id: ClassVar[str] = "ContinuumGym/OcclusionAvoidance-v0"
+    default_weights: ClassVar[dict] = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0,
+                                       "action": 0.01}
+    residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
+
+    task: str = field(default="hold", metadata=spec(
+        doc="`hold` (hold a paper-like start pose), `random` (smooth random tip trajectories, <= 12 mm), `mixed` "
+            "(even task ids hold, odd ids random), `circle` (the paper's task b; test split only)", type_name="str"))
+    task_split: str = field(default="train", metadata=spec(doc="`train` or `test`: disjoint task instances",
+                                                           type_name="str"))
+    base_controller: str | None = field(default="projected_gradient", metadata=spec(
+        doc="residual base: `projected_gradient`, `minimum_norm`, or `None` (pure RL)", type_name="str or None"))
+    residual_scale: float = field(default=0.3, metadata=spec(
+        unit="fraction of the rate limits", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
+    residual_space: str = field(default="nullspace", metadata=spec(
+        doc="`nullspace` (projected into the tip Jacobian's null space at every substep) or `joint`",
+        type_name="str"))
+    reward_weights: dict = field(default_factory=dict, metadata=spec(
+        doc="weights of the terms `voi`, `tip_position`, `tip_orientation`, `visibility`, `action` (defaults 1, "
+            "0.05, 0.05, 10, 0.01; each in [0, 1e6])", type_name="dict"))
+    visibility_guard: float | None = field(default=0.69, metadata=spec(
+        unit="fraction of the cone half-angle", doc="the residual's endoscope rotation is cut where it would carry "
+        "the tip beyond this angle from the view axis (in (0, 1); `None`: off)", type_name="float or None"))
+    control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
+                                                          type_name="float"))
+    substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
+                                                        "loop at the default)", type_name="int"))
+    max_bend: float = field(default=math.pi / 2, metadata=spec(
+        unit="rad", doc="per-segment bend limit, two-sided |pi/2 - theta_j| <= max_bend (in (0, pi])",
+        type_name="float"))
+    insertion: tuple = field(default=(0.0, 0.04), metadata=spec(unit="m", doc="(min, max) insertion q_ins, within "
+                                                                "[0, 0.2]", type_name="(float, float)"))
+    bend_rate: float = field(default=3.0, metadata=spec(unit="rad/s", doc="|theta_dot| limit", type_name="float"))
+    plane_rate: float = field(default=6.0, metadata=spec(unit="rad/s", doc="|delta_dot| limit", type_name="float"))
+    insertion_rate: float = field(default=0.02, metadata=spec(unit="m/s", doc="|q_ins_dot| limit",
+                                                              type_name="float"))
+    gamma_rate: float = field(default=3.0, metadata=spec(unit="rad/s", doc="|gamma_dot| limit (endoscope rotation)",
+                                                         type_name="float"))
+    lens_model: str = field(default="literal", metadata=spec(
+        doc="`literal` or `physical` reading of the lens origin (paper-notes §1.3 item 7)", type_name="str"))
+    max_episode_steps: int | None = field(default=None, metadata=spec(
+        doc="cap on the episode length in steps (`None`: the task's own duration)", type_name="int or None"))
+
+    def __post_init__(self) -> None:
+        from continuum_gym.baselines.occlusion import OcclusionLimits
+
+        set_ = object.__setattr__
+        _check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
+        choice(self.residual_space, self.residual_spaces, "residual_space")
+        set_(self, "reward_weights", weights(self.reward_weights, self.default_weights, high=MAX_REWARD_WEIGHT))
+        if self.visibility_guard is not None:
+            if isinstance(self.visibility_guard, str):
+                raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "
+                                 f"or None; got {self.visibility_guard!r}")
+            set_(self, "visibility_guard", fraction(self.visibility_guard, "visibility_guard", allow_one=False))
+        choice(self.lens_model, ("literal", "physical"), "lens_model")
+        limits = OcclusionLimits(max_bend=self.max_bend, insertion=self.insertion, bend_rate=self.bend_rate,
+                                 plane_rate=self.plane_rate, insertion_rate=self.insertion_rate,
+                                 gamma_rate=self.gamma_rate)
+        for name in ("max_bend", "insertion", "bend_rate", "plane_rate", "insertion_rate", "gamma_rate"):
+            set_(self, name, getattr(limits, name))
+
+    @property
+    def limits(self):
+        """The ``OcclusionLimits`` these fields define."""
+        from continuum_gym.baselines.occlusion import OcclusionLimits
+
+        return OcclusionLimits(max_bend=self.max_bend, insertion=self.insertion, bend_rate=self.bend_rate,
+                               plane_rate=self.plane_rate, insertion_rate=self.insertion_rate,
+                               gamma_rate=self.gamma_rate)
+
+
+@dataclass(frozen=True)
+class ViewTrackingConfig(EnvConfig):
+    """Configuration of ``ContinuumGym/ViewTracking-v0`` (SI units)."""
+
+    env_id: ClassVar[str] = "ContinuumGym/ViewTracking-v0"
+    foreign_keywords: ClassVar[tuple] = ("max_bend", "lens_model")
+    default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
+                                       "overlap_bonus": 0.0}
+    residual_spaces: ClassVar[tuple] = ("joint", "target")
+
+    task: str = field(default="random", metadata=spec(
+        doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "
+            "map's distribution off its grid), and the paper's `case1`, `case2`, `coverage` (test split only)",
+        type_name="str"))
+    task_split: str = field(default="train", metadata=spec(doc="`train` or `test`: disjoint task instances",
+                                                           type_name="str"))
+    base_controller: str | None = field(default="dimension_reduced", metadata=spec(
+        doc="residual base: `dimension_reduced`, `resolved_rate`, or `None` (pure RL)", type_name="str or None"))
+    residual_scale: float = field(default=0.3, metadata=spec(
+        unit="fraction of the action scale", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
+    residual_space: str = field(default="joint", metadata=spec(
+        doc="`joint` (added to the baseline's joint rates) or `target` (moves the target the baseline's IK "
+            "tracks)", type_name="str"))
+    reward_weights: dict = field(default_factory=dict, metadata=spec(
+        doc="weights of `overlap`, `position`, `orientation`, `action`, `overlap_bonus` (defaults 1, 0.1, 0.1, "
+            "0.01, 0; each in [0, 1e6])", type_name="dict"))
+    control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step = the IK step (in (0, 0.1])",
+                                                          type_name="float"))
+    substeps: int = field(default=1, metadata=spec(doc="must be 1: the paper's IK step is the control step",
+                                                   type_name="int"))
+    rate_limits: tuple | None = field(default=None, metadata=spec(
+        unit="m/s, rad/s", doc="6 joint-rate limits (`None`: the paper has none)", type_name="6 floats or None"))
+    grid: int = field(default=21, metadata=spec(doc="coverage grid points per axis (in [2, 401])", type_name="int"))
+    max_episode_steps: int | None = field(default=None, metadata=spec(
+        doc="cap on the episode length in steps (`None`: the task's own duration)", type_name="int or None"))
+    observe_target: bool = field(default=False, metadata=spec(
+        doc="append the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll] to the observation",
+        type_name="bool"))
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        _check_common(self, VIEW_TASKS, VIEW_TEST_ONLY)
+        choice(self.residual_space, self.residual_spaces, "residual_space")
+        if self.residual_space == "target" and self.base_controller is None:
+            raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
+        set_(self, "reward_weights", weights(self.reward_weights, self.default_weights, high=MAX_REWARD_WEIGHT))
+        if self.substeps != 1:
+            raise ValueError(f"substeps must be 1 for ViewTracking (the paper's IK step is the control step); "
+                             f"got {self.substeps!r}")
+        if self.rate_limits is not None:
+            try:
+                values = tuple(self.rate_limits)
+            except TypeError:
+                values = ()
+            if len(values) != 6:
+                raise ValueError("rate_limits must be 6 positive joint-rate limits (m/s for L0, rad/s) or None; got "
+                                 f"{describe(self.rate_limits)}")
+            set_(self, "rate_limits", tuple(
+                math.inf if v == math.inf else number(v, f"rate_limits[{k}]", low=0.0, low_open=True,
+                                                      unit="m/s or rad/s (inf: unlimited)")
+                for k, v in enumerate(values)))
+        set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
+        set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
+
+
+__all__ = ["EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]

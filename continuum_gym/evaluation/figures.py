@@ -1,0 +1,146 @@
+"""Figures of ``continuum-gym evaluate``: distributions, traces, coverage maps, learning curves.
+
+Each axis names its metric in words with its unit and which direction is better; box plots say what
+their marks are; the offline optimum, where the table has one, is drawn as a reference line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from continuum_gym.envs.spec import EnvSpec, get_spec
+
+#: What a per-step trace value is, for axis labels: (words, higher is better).
+TRACE_LABELS = {"voi": ("VOI", False), "or": ("overlap ratio OR", True), "in_view": ("tip in view", True),
+                "tip_error": ("tip error (m)", False), "position_error": ("target-point error (m)", False)}
+
+
+def _direction(higher_is_better: bool) -> str:
+    return "higher is better" if higher_is_better else "lower is better"
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_distributions(spec: EnvSpec, results: dict, table: dict, path: Path) -> Path:
+    """Box plots of the headline metric per method (all seeds x non-grid episodes), optimum as a line."""
+    plt = _pyplot()
+    metric = spec.metric(spec.headline_metric)
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    labels, data = [], []
+    for method, tasks in results.items():
+        labels.append(method)
+        data.append(np.concatenate([np.stack(t["scores"][metric.name]).ravel() for t in tasks.values()
+                                    if not t["grid"]]))
+    ax.boxplot(data, showmeans=True, meanprops={"marker": "^", "markerfacecolor": "tab:green",
+                                                "markeredgecolor": "tab:green"})
+    ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, ha="right")
+    handles = [plt.Line2D([], [], color="tab:orange", label="median"),
+               plt.Line2D([], [], marker="^", color="tab:green", linestyle="none", label="mean"),
+               plt.Rectangle((0, 0), 1, 1, fill=False, label="box: quartiles; whiskers: 1.5 IQR")]
+    optimum = table.get("offline_optimum", {}).get(metric.name)
+    if isinstance(optimum, dict):
+        note = table["offline_optimum"].get("note", "")
+        where = f" ({note.split(':')[0]})" if note else ""
+        handles.append(ax.axhline(optimum["mean"], color="tab:purple", linestyle="--",
+                                  label=f"offline optimum, mean{where}"))
+    ax.legend(handles=handles, fontsize=8, loc="best")
+    ax.set(ylabel=metric.axis_label(), title=f"{spec.short_name}: {metric.label} per episode (held-out test tasks)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def draw_traces(spec: EnvSpec, results: dict, path: Path, control_dt: float = 0.01) -> Path:
+    """The per-step trace of the paper task of ``spec.trace_task``, first seed of each method."""
+    plt = _pyplot()
+    key = f"trace_{spec.trace_value}"
+    words, higher = TRACE_LABELS.get(spec.trace_value, (spec.trace_value, True))
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for method, tasks in results.items():
+        task = tasks.get(spec.trace_task)
+        if not task or not task["traces"]:
+            continue
+        trace = task["traces"][0][key]
+        time = np.arange(len(trace)) * control_dt
+        line, = ax.plot(time, trace, label=method)
+        ended = np.flatnonzero(~np.isfinite(trace))
+        if ended.size and ended[0] < len(trace):
+            ax.axvline(time[ended[0]], color=line.get_color(), linestyle=":", linewidth=1)
+            ax.annotate(f"{method} ended at {time[ended[0]]:.2f} s", (time[ended[0]], ax.get_ylim()[1]),
+                        fontsize=7, rotation=90, va="top", ha="right", color=line.get_color())
+    ax.set(xlabel="time (s)", ylabel=f"{words}, {_direction(higher)}",
+           title=f"{spec.short_name}: {spec.trace_task} task, first seed (a dotted line marks an episode that "
+                 "ended early)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def draw_coverage_maps(spec: EnvSpec, results: dict, table: dict, path: Path) -> Path | None:
+    """Final-OR maps over the grid, one per method: OR averaged over seeds, titled with the table's coverage."""
+    metric = next((m for m in spec.metrics if m.grid_metric), None)
+    maps = [(m, t) for m, tasks in results.items() for t in tasks.values() if t["grid"]]
+    if metric is None or not maps:
+        return None
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(maps), figsize=(4.2 * len(maps), 4.3), constrained_layout=True)
+    image = None
+    for ax, (method, task) in zip(np.atleast_1d(axes), maps):
+        values = np.stack(task["scores"][metric.grid_metric])
+        grid = int(round(np.sqrt(values.shape[1])))
+        coverage = table.get(method, {}).get(metric.name, {}).get("mean", np.mean(values > metric.threshold) * 100)
+        image = ax.imshow(values.mean(axis=0).reshape(grid, grid).T, origin="lower", extent=[-60, 60, -60, 60],
+                          vmin=0, vmax=1)
+        seeds = values.shape[0]
+        ax.set(title=f"{method}\ncoverage {coverage:.1f} % ({seeds} seed{'s' if seeds > 1 else ''})",
+               xlabel="yaw (deg)", ylabel="pitch (deg)")
+    fig.colorbar(image, ax=axes, label="final OR, mean over seeds (higher is better)")
+    fig.suptitle(f"{spec.short_name}: coverage = mean over seeds of the % of grid points with final OR > "
+                 f"{metric.threshold:g} (thresholded per seed, then averaged)", fontsize=9)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path) -> Path | None:
+    """Held-out headline metric against environment steps, one line per shipped run."""
+    curves = [(method, run) for method, runs in policies.get(spec.env_id, {}).items() for run in runs
+              if (run / "evaluations.npz").exists()]
+    if not curves:
+        return None
+    plt = _pyplot()
+    metric = spec.metric(spec.headline_metric)
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for method, run in curves:
+        data = np.load(run / "evaluations.npz")
+        ax.plot(data["timesteps"], data[metric.name], label=f"{method} ({run.name.split('_')[-1]})")
+    ax.set(xlabel="environment steps", ylabel=f"{metric.axis_label()} (held-out)",
+           title=f"{spec.short_name}: learning curves")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path) -> list:
+    """Every figure of one env into ``out``; returns the paths written."""
+    spec = get_spec(env_id)
+    short = spec.short_name
+    paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png"),
+             draw_traces(spec, results, out / f"{short}_{spec.trace_task}_trace.png"),
+             draw_coverage_maps(spec, results, table, out / f"{short}_coverage_maps.png"),
+             draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png")]
+    return [path for path in paths if path is not None]
