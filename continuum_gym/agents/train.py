@@ -33,8 +33,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from continuum_gym.agents.validation import (SCHEDULE_KEYS, check_combination, check_hyperparams, output_directory,
-                                             schedule_initial, seed_number, whole_number)
+from continuum_gym.agents.validation import (
+    SCHEDULE_KEYS,
+    check_combination,
+    check_hyperparams,
+    output_directory,
+    schedule_initial,
+    seed_number,
+    whole_number,
+)
 from continuum_gym.evaluation.io import temporary_files, write_bytes_atomic, write_text_atomic
 
 ALGOS = ("ppo", "sac", "td3")
@@ -74,7 +81,8 @@ def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
     if not isinstance(table, dict):
         raise ValueError(f"{path} must map env ids to blocks of hyperparameters; got a {type(table).__name__}")
     if env_id not in table:
-        raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {sorted(str(k) for k in table if k != 'default')}")
+        blocks = sorted(str(k) for k in table if k != "default")
+        raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
     block = table[env_id]
     if not isinstance(block, dict):
         raise ValueError(f"{path}: the block for {env_id!r} must be a mapping of hyperparameters; got {block!r}")
@@ -293,13 +301,17 @@ def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs"
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
     run = {**RUN_DEFAULTS, **hp}
+    import numba
     import torch
 
-    from continuum_gym.agents.checkpoint import (CHECKPOINTS, clean_temporary, model_files, remove_legacy_files,
-                                                 write_unit)
+    from continuum_gym.agents.checkpoint import (
+        CHECKPOINTS,
+        clean_temporary,
+        model_files,
+        remove_legacy_files,
+        write_unit,
+    )
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
-
-    import numba
 
     # Runs are parallelised by process (--parallel); one thread each keeps them from fighting.
     torch.set_num_threads(1)
@@ -355,8 +367,7 @@ def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from continuum_gym.agents.checkpoint import (BURN_IN_ACTOR, CHECKPOINTS, NORMALIZER, CheckpointCallback,
-                                                 load_model)
+    from continuum_gym.agents.checkpoint import BURN_IN_ACTOR, CHECKPOINTS, NORMALIZER, CheckpointCallback, load_model
     from continuum_gym.agents.residual import ActorBurnIn, actor_parameters, zero_init_residual
 
     venv = VecMonitor(venv)
@@ -378,7 +389,8 @@ def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit
         algo_kwargs = {k: _algo_value(k, v) for k, v in run.items() if k in _algo_keys(cls)}
         if algo == "td3" and run.get("action_noise_std"):
             dim = venv.action_space.shape[0]
-            algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), float(run["action_noise_std"]) * np.ones(dim))
+            sigma = float(run["action_noise_std"]) * np.ones(dim)
+            algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), sigma)
         model = cls(run.get("policy", "MlpPolicy"), venv, seed=seed, verbose=0, device="cpu",
                     tensorboard_log=str(run_dir / "tb"), **algo_kwargs)
         if base is not None:

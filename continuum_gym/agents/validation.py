@@ -257,8 +257,8 @@ def check_hyperparams(block: dict, cls, algo: str, source: str) -> dict:
         if not isinstance(key, str):
             raise ValueError(f"{source}: hyperparameter names must be strings; got {key!r}")
         if key in TRAINER_SET:
-            raise ValueError(f"{source}: {key!r} cannot be set in a hyperparameter file ({TRAINER_SET[key] or 'internal'})"
-                             f"; got {value!r}")
+            why = TRAINER_SET[key] or "internal"
+            raise ValueError(f"{source}: {key!r} cannot be set in a hyperparameter file ({why}); got {value!r}")
         if key not in valid:
             raise ValueError(f"{source}: unknown hyperparameter {key!r} for {algo}{closest(key, valid)}; "
                              f"valid: {valid}")
