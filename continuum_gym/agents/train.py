@@ -12,8 +12,9 @@ A run directory is always finished, resumable or restartable:
 * without one (stopped before its first checkpoint): a re-run, with or without ``--resume``, starts
   it again from step 0 and says so.
 
-Units are written every ``checkpoint_freq`` steps or ``checkpoint_minutes`` of wall time, whichever
-comes first, always where every counted step has been trained on. Everything is checked (hyperparameters
+Units are written every ``checkpoint_freq`` steps or ``checkpoint_minutes`` (default 5) of wall time,
+whichever comes first, always where every counted step has been trained on; the newest
+``keep_checkpoints`` (default 2) are kept. Everything is checked (hyperparameters
 against the algorithm's constructor, the command line) before anything is written.
 """
 
