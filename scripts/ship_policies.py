@@ -2,19 +2,20 @@
 
     python scripts/ship_policies.py RUN_DIR [RUN_DIR ...] [--dest continuum_gym/agents/policies]
 
-A run that was stopped before its end ships its latest checkpoint (``checkpoints/latest.zip``); the
-step count it reached is recorded in ``shipped.yml`` beside it.
+A run that was stopped before its end ships its newest verified checkpoint
+(``checkpoints/step_<n>/model.zip``); the step count it reached is recorded in ``shipped.yml`` beside it.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 from pathlib import Path
 
 import yaml
+
+from continuum_gym.agents.checkpoint import CHECKPOINTS, MODEL, find_resumable
 
 DEST = Path(__file__).resolve().parents[1] / "continuum_gym" / "agents" / "policies"
 
@@ -22,14 +23,13 @@ DEST = Path(__file__).resolve().parents[1] / "continuum_gym" / "agents" / "polic
 def ship(run: Path, dest: Path) -> Path:
     config = yaml.safe_load((run / "config.yml").read_text())
     model = run / "model.zip"
-    source = "model.zip"
+    source, steps = "model.zip", config.get("total_timesteps")
     if not model.exists():
-        model = run / "checkpoints" / "latest.zip"
-        source = "checkpoints/latest.zip"
-    if not model.exists():
-        raise FileNotFoundError(f"{run}: neither model.zip nor checkpoints/latest.zip")
-    state = run / "checkpoints" / "state.json"
-    steps = json.loads(state.read_text())["num_timesteps"] if state.exists() else None
+        unit, _ = find_resumable(run / CHECKPOINTS)
+        if unit is None:
+            raise FileNotFoundError(f"{run}: neither model.zip nor a verified checkpoint")
+        model = unit.file(MODEL)
+        source, steps = str(model.relative_to(run)), int(unit.state()["num_timesteps"])
     target = dest / config["env_id"].split("/")[-1] / run.name
     target.mkdir(parents=True, exist_ok=True)
     shutil.copy2(model, target / "model.zip")

@@ -105,19 +105,19 @@ def _train_command(out, hyperparams, *extra):
 def test_killed_run_resumes_from_its_checkpoint(tmp_path):
     hyperparams = tmp_path / "ppo.yml"
     hyperparams.write_text(yaml.safe_dump(TINY))
+    from continuum_gym.agents.checkpoint import find_resumable
+
     run_dir = tmp_path / "runs" / "ViewTracking_ppo_dimension_reduced_seed3"
-    state = run_dir / "checkpoints" / "state.json"
+    folder = run_dir / "checkpoints"
     proc = subprocess.Popen(_train_command(tmp_path / "runs", hyperparams), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     deadline = time.time() + 240
-    while not state.exists() and time.time() < deadline and proc.poll() is None:
+    while find_resumable(folder)[0] is None and time.time() < deadline and proc.poll() is None:
         time.sleep(0.2)
-    assert state.exists(), "no checkpoint before the deadline"
+    assert find_resumable(folder)[0] is not None, "no checkpoint before the deadline"
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    import json
-
-    killed_at = json.loads(state.read_text())["num_timesteps"]
+    killed_at = find_resumable(folder)[0].state()["num_timesteps"]
     assert 0 < killed_at < 3072 and not (run_dir / "model.zip").exists()
     # Without --resume nothing is overwritten.
     before = {p: p.stat().st_mtime_ns for p in run_dir.rglob("*") if p.is_file()}
@@ -130,7 +130,7 @@ def test_killed_run_resumes_from_its_checkpoint(tmp_path):
 
     model = PPO.load(run_dir / "model.zip", device="cpu")
     assert model.num_timesteps >= 3072
-    assert json.loads(state.read_text())["num_timesteps"] == model.num_timesteps
+    assert find_resumable(folder)[0].state()["num_timesteps"] == model.num_timesteps
     commands = (run_dir / "command.txt").read_text().splitlines()
     assert len(commands) == 2 and "--resume" in commands[1]
     curve = np.load(run_dir / "evaluations.npz")

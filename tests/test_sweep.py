@@ -93,19 +93,21 @@ def test_killed_trial_resumes_from_its_checkpoint(tmp_path, files):
             f"{str(tmp_path / 'sw')!r}, {str(hp)!r})")
     run_dir = tmp_path / "sw" / "trials" / trial_tag({"learning_rate": 3e-4, "seed": 1}) / \
         "ViewTracking_ppo_dimension_reduced_seed1"
-    state = run_dir / "checkpoints" / "state.json"
+    from continuum_gym.agents.checkpoint import find_resumable
+
+    folder = run_dir / "checkpoints"
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 240
-    while not state.exists() and time.time() < deadline and proc.poll() is None:
+    while find_resumable(folder)[0] is None and time.time() < deadline and proc.poll() is None:
         time.sleep(0.2)
-    assert state.exists()
+    assert find_resumable(folder)[0] is not None
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    killed_at = json.loads(state.read_text())["num_timesteps"]
+    killed_at = find_resumable(folder)[0].state()["num_timesteps"]
     assert killed_at < 2048 and not (run_dir / "model.zip").exists()
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
-    final = json.loads(state.read_text())["num_timesteps"]
+    final = find_resumable(folder)[0].state()["num_timesteps"]
     assert final >= 2048 and (run_dir / "model.zip").exists()
     curve = np.load(run_dir / "evaluations.npz")
     assert curve["timesteps"][-1] == final

@@ -54,19 +54,35 @@ class ActorBurnIn(BaseCallback):
 
     The critic learns the baseline's values first, so the actor's first updates follow a sensible
     advantage or Q estimate instead of a random one. Restores the actor after every update until then.
+    ``steps`` counts the model's ``num_timesteps``, so a resumed run continues where it stopped;
+    ``snapshot`` is the initial actor to restore (default: the actor when training starts), which a
+    resumed run takes from its checkpoint (``save_snapshot`` / ``load_snapshot``).
     """
 
-    def __init__(self, steps: int, verbose: int = 0):
+    def __init__(self, steps: int, snapshot: list[torch.Tensor] | None = None, verbose: int = 0):
         super().__init__(verbose)
         self.steps = int(steps)
-        self._snapshot = None
+        self._snapshot = snapshot
 
     def _on_training_start(self) -> None:
-        self._snapshot = [p.detach().clone() for p in actor_parameters(self.model)]
+        if self._snapshot is None:
+            self._snapshot = [p.detach().clone() for p in actor_parameters(self.model)]
+
+    def save_snapshot(self, path) -> None:
+        """Write the actor being restored (taken at training start unless given)."""
+        if self._snapshot is None:
+            raise RuntimeError("ActorBurnIn has no snapshot before training starts")
+        torch.save([tensor.cpu() for tensor in self._snapshot], path)
+
+    @staticmethod
+    def load_snapshot(path) -> list[torch.Tensor]:
+        return torch.load(path, weights_only=True)
 
     @torch.no_grad()
     def _restore(self) -> None:
-        if self._snapshot is not None and self.num_timesteps <= self.steps:
+        # model.num_timesteps, not self.num_timesteps: the callback's copy is only refreshed in on_step,
+        # so at the first rollout start of a resumed run it would still read 0.
+        if self._snapshot is not None and self.model.num_timesteps <= self.steps:
             for param, saved in zip(actor_parameters(self.model), self._snapshot):
                 param.copy_(saved)
             if isinstance(self.model, TD3):
@@ -76,6 +92,6 @@ class ActorBurnIn(BaseCallback):
         self._restore()
 
     def _on_step(self) -> bool:
-        if self.num_timesteps <= self.steps and not isinstance(self.model, PPO):
+        if self.model.num_timesteps <= self.steps and not isinstance(self.model, PPO):
             self._restore()
         return True

@@ -112,10 +112,10 @@ def run_trial(config, env_id, algo, base, steps, out, hp_file, report=None):
     hyperparams = trial_dir / "hyperparams.yml"
     write_text_atomic(hyperparams, yaml.safe_dump({env_id: block}, sort_keys=False))
     run_dir = trial_dir / run_name(env_id, algo, base, int(config["seed"]))
-    resume = (run_dir / "checkpoints" / "latest.zip").exists()
-    if run_dir.exists() and (run_dir / "model.zip").exists():
+    if (run_dir / "model.zip").exists():
         return run_dir  # finished before an interruption
-    return train(env_id, algo, base, int(config["seed"]), steps=steps, out=trial_dir, resume=resume,
+    # A retried trial continues from its newest intact checkpoint, or starts again if it had none.
+    return train(env_id, algo, base, int(config["seed"]), steps=steps, out=trial_dir, resume=run_dir.exists(),
                  hyperparams=hyperparams, progress=False, report=report)
 
 

@@ -1,18 +1,31 @@
 """``continuum-gym train``: residual (or pure) RL with stable-baselines3 on the native vector env.
 
 Each run directory holds ``config.yml`` (fully resolved), ``args.yml``, ``command.txt``, TensorBoard
-logs, ``evaluations.npz`` (held-out learning curve), ``checkpoints/latest.zip`` (+ replay buffer for
-off-policy learners, written atomically) and ``model.zip`` at the end. ``--resume`` continues from the
-latest checkpoint with optimizer (and replay) state and the step count; without it an existing run
-is never overwritten.
+logs, ``evaluations.npz`` (held-out learning curve), ``checkpoints/step_<n>/`` units (model, replay
+buffer, normaliser, burn-in actor, state; see ``checkpoint.py``) and ``model.zip`` at the end.
+
+A run directory is always finished, resumable or restartable:
+
+* finished (``model.zip``): never overwritten; ``--resume`` continues it to a larger ``--steps``.
+* with a verified checkpoint: ``--resume`` continues from the newest intact unit (an older one if the
+  newest is damaged); without ``--resume`` nothing is touched.
+* without one (stopped before its first checkpoint): a re-run, with or without ``--resume``, starts
+  it again from step 0 and says so.
+
+Units are written every ``checkpoint_freq`` steps or ``checkpoint_minutes`` (default 5) of wall time,
+whichever comes first, always where every counted step has been trained on; the newest
+``keep_checkpoints`` (default 2) are kept. Everything is checked (hyperparameters
+against the algorithm's constructor, the command line) before anything is written.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
+import io
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 import time
@@ -21,17 +34,28 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from continuum_gym.agents.run_inputs import (
+    SCHEDULE_KEYS,
+    check_combination,
+    check_hyperparams,
+    output_directory,
+    schedule_initial,
+    seed_number,
+    whole_number,
+)
 from continuum_gym.envs.spec import ENV_SPECS, get_spec
-from continuum_gym.evaluation.io import write_text_atomic
+from continuum_gym.evaluation.io import temporary_files, write_bytes_atomic, write_text_atomic
 
 ALGOS = ("ppo", "sac", "td3")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-# Keys of a hyperparameter block that are not arguments of the SB3 algorithm.
-RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
-            "checkpoint_freq", "policy", "action_noise_std", "normalize_reward")
 EVAL_TASK_OFFSET = 0
-# Hyperparameters that may be given as rl-zoo's linear schedules, "lin_<initial value>".
-SCHEDULE_KEYS = ("learning_rate", "clip_range")
+# Values of the run keys when a block leaves them out.
+RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000, "n_eval_episodes": 16,
+                "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2, "normalize_reward": False}
+
+
+class RunBusyError(RuntimeError):
+    """Another process is training the same run directory."""
 
 
 def run_name(env_id: str, algo: str, base, seed: int) -> str:
@@ -40,14 +64,34 @@ def run_name(env_id: str, algo: str, base, seed: int) -> str:
 
 
 def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
-    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved); a missing id raises ``ValueError``."""
+    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``."""
     path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    if not path.exists():
-        raise ValueError(f"no hyperparameter file {path}")
-    table = yaml.safe_load(path.read_text())
+    if not path.is_file():
+        raise ValueError(f"--hyperparams: no file {str(path)!r}" + (" (it is a directory)" if path.is_dir() else ""))
+    try:
+        table = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ValueError(f"{path} is not valid YAML ({getattr(error, 'problem', None) or error}{where})") from None
+    if table is None:
+        raise ValueError(f"{path} is empty; expected a mapping of env id to a block of hyperparameters")
+    if not isinstance(table, dict):
+        raise ValueError(f"{path} must map env ids to blocks of hyperparameters; got a {type(table).__name__}")
     if env_id not in table:
-        raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {sorted(k for k in table if k != 'default')}")
-    return dict(table[env_id])
+        blocks = sorted(str(k) for k in table if k != "default")
+        raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
+    block = table[env_id]
+    if not isinstance(block, dict):
+        raise ValueError(f"{path}: the block for {env_id!r} must be a mapping of hyperparameters; got {block!r}")
+    return dict(block)
+
+
+def resolve_hyperparams(algo: str, env_id: str, path=None) -> dict:
+    """``load_hyperparams`` checked against the algorithm (``validation.check_hyperparams``)."""
+    block = load_hyperparams(algo, env_id, path)
+    source = f"{Path(path).name if path else f'{algo}.yml'} [{env_id}]"
+    return check_hyperparams(block, _algo_class(algo), algo, source)
 
 
 def linear_schedule(value, name):
@@ -56,18 +100,14 @@ def linear_schedule(value, name):
         return value
     if not value.startswith("lin_"):
         raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}")
-    try:
-        initial = float(value[4:])
-    except ValueError:
-        raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}") from None
-    if not initial > 0:
-        raise ValueError(f"{name}: the initial value of {value!r} must be > 0")
+    initial = schedule_initial(value, name)
     from stable_baselines3.common.utils import LinearSchedule
 
     return LinearSchedule(initial, 0.0, 1.0)
 
 
-def validate(env_id, algo, base):
+def validate(env_id, algo, base) -> None:
+    """``ValueError`` unless env_id is known, algo one of ``ALGOS`` and base one of the env's baselines or None."""
     spec = get_spec(env_id)
     if algo not in ALGOS:
         raise ValueError(f"unknown algo {algo!r}; valid: {list(ALGOS)}")
@@ -90,47 +130,14 @@ def _git_commit():
 
 
 def save_model_atomic(model, path: Path) -> None:
-    tmp = path.with_name(f".{path.stem}.tmp.zip")
-    model.save(tmp)
-    os.replace(tmp, path)
+    buffer = io.BytesIO()
+    model.save(buffer)
+    write_bytes_atomic(path, buffer.getvalue())
 
 
-class AtomicCheckpoint:
-    """SB3 callback factory: every ``freq`` steps write ``checkpoints/latest.zip`` (+ replay buffer) atomically."""
-
-    @staticmethod
-    def make(run_dir: Path, freq: int):
-        from stable_baselines3.common.callbacks import BaseCallback
-        from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-
-        class _Checkpoint(BaseCallback):
-            def __init__(self):
-                super().__init__()
-                self.last = 0
-
-            def _on_step(self) -> bool:
-                if self.num_timesteps - self.last >= freq:
-                    self.save()
-                return True
-
-            def save(self):
-                self.last = self.num_timesteps
-                folder = run_dir / "checkpoints"
-                folder.mkdir(parents=True, exist_ok=True)
-                if isinstance(self.model, OffPolicyAlgorithm):
-                    tmp = folder / ".replay_buffer.tmp.pkl"
-                    self.model.save_replay_buffer(tmp)
-                    os.replace(tmp, folder / "replay_buffer.pkl")
-                normalizer = self.model.get_vec_normalize_env()
-                if normalizer is not None:
-                    tmp = folder / ".vecnormalize.tmp.pkl"
-                    normalizer.save(str(tmp))
-                    os.replace(tmp, folder / "vecnormalize.pkl")
-                save_model_atomic(self.model, folder / "latest.zip")
-                write_text_atomic(folder / "state.json", json.dumps({"num_timesteps": int(self.num_timesteps),
-                                                                     "time": time.time()}))
-
-        return _Checkpoint()
+def notice(message: str) -> None:
+    """What the trainer decided about a run directory (restart, resume, fallback), on stderr."""
+    print(f"continuum-gym train: {message}", file=sys.stderr, flush=True)
 
 
 def headline_metric(env_id: str) -> str:
@@ -138,9 +145,11 @@ def headline_metric(env_id: str) -> str:
     return get_spec(env_id).headline_metric
 
 
-def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=None):
+def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=None, history=None):
     """Periodic evaluation on held-out test tasks (fixed ids), logged to TensorBoard and evaluations.npz.
 
+    ``freq`` is in environment steps. ``history`` (``{column: list}``, from a checkpoint) continues an
+    earlier learning curve: the next evaluation is ``freq`` steps after its last row, not at once.
     ``report(timesteps, value)`` is called after each evaluation (a sweep scheduler listens there).
     """
     from stable_baselines3.common.callbacks import BaseCallback
@@ -156,10 +165,10 @@ def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=Non
     class _Eval(BaseCallback):
         def __init__(self):
             super().__init__()
-            self.last = -freq
-            previous = np.load(path) if path.exists() else None
-            self.history = {key: list(previous[key]) for key in previous.files} if previous is not None else {
-                "timesteps": [], "mean_return": [], metric: []}
+            self.history = {"timesteps": [], "mean_return": [], metric: []}
+            for key, values in (history or {}).items():
+                self.history[key] = list(values)
+            self.last = self.history["timesteps"][-1] if self.history["timesteps"] else -freq
 
         def _on_step(self) -> bool:
             if self.num_timesteps - self.last >= freq:
@@ -170,102 +179,269 @@ def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=Non
             if not self.history["timesteps"] or self.history["timesteps"][-1] != self.num_timesteps:
                 self.evaluate()
 
+        def records(self) -> dict:
+            """The curve so far as JSON-able lists (what a checkpoint stores)."""
+            return {key: [int(v) if key == "timesteps" else float(v) for v in values]
+                    for key, values in self.history.items()}
+
+        def write(self) -> None:
+            buffer = io.BytesIO()
+            np.savez(buffer, **{k: np.asarray(v) for k, v in self.history.items()})
+            write_bytes_atomic(path, buffer.getvalue())
+
         def evaluate(self):
             self.last = self.num_timesteps
             result = run_episodes(core, self.model, task_ids)
-            self.history["timesteps"].append(self.num_timesteps)
+            self.history["timesteps"].append(int(self.num_timesteps))
             self.history["mean_return"].append(float(result["return"].mean()))
             self.history[metric].append(float(result[metric].mean()))
             self.logger.record("eval/mean_return", float(result["return"].mean()))
             self.logger.record(f"eval/{metric}", float(result[metric].mean()))
-            tmp = run_dir / ".evaluations.tmp.npz"
-            np.savez(tmp, **{k: np.asarray(v) for k, v in self.history.items()})
-            os.replace(tmp, path)
+            self.write()
             if report is not None:
                 report(int(self.num_timesteps), float(result[metric].mean()))
 
     return _Eval()
 
 
+def _history_until(path: Path, step: int) -> dict:
+    """Rows of an old-layout evaluations.npz up to ``step``, strictly increasing (old resumes duplicated rows)."""
+    if not path.is_file():
+        return {}
+    data = np.load(path)
+    keep, last = [], -np.inf
+    for index, timestep in enumerate(data["timesteps"]):
+        if last < timestep <= step:
+            keep.append(index)
+            last = timestep
+    return {key: data[key][keep].tolist() for key in data.files}
+
+
+@contextlib.contextmanager
+def _exclusive(run_dir: Path):
+    """Hold an advisory lock on the run directory (released by the kernel if the process dies)."""
+    try:
+        import fcntl
+    except ImportError:  # no flock on this platform: run unguarded
+        yield
+        return
+    fd = os.open(run_dir, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RunBusyError(f"{run_dir} is being trained by another process") from None
+        yield
+    finally:
+        os.close(fd)
+
+
+def _starting_point(run_dir: Path, resume: bool, total: int):
+    """``(unit, done)``: the checkpoint unit to start from (``None``: step 0) after refusing what must not
+    be overwritten; ``done`` when a finished run already has ``total`` steps."""
+    from continuum_gym.agents.checkpoint import CHECKPOINTS, discard, find_resumable, legacy_unit
+
+    folder = run_dir / CHECKPOINTS
+    finished = (run_dir / "model.zip").is_file()
+    unit, damaged = find_resumable(folder)
+    unit = unit or legacy_unit(folder)
+    if not resume and finished:
+        raise FileExistsError(f"{run_dir} is a finished run (model.zip); nothing is overwritten "
+                              "(--resume continues it to a larger --steps)")
+    if not resume and unit is not None:
+        raise FileExistsError(f"{run_dir} exists with a checkpoint at step {unit.step}; pass --resume to continue "
+                              "it (nothing is overwritten)")
+    if finished and unit is None:
+        raise FileNotFoundError(f"--resume: {run_dir} is finished and has no intact checkpoint to continue from")
+    for bad, problem in damaged:
+        then = f"falling back to {unit.path.name}" if unit is not None else "removing it"
+        notice(f"checkpoint {bad.path} is damaged ({problem}); {then}")
+        discard(bad)
+    if unit is not None and finished and unit.step >= total:
+        notice(f"{run_dir} is finished at step {unit.step} (>= {total} steps); nothing to do")
+        return unit, True
+    if unit is not None:
+        notice(f"resuming {run_dir} from step {unit.step} ({unit.path.name})")
+        return unit, False
+    if any(run_dir.iterdir()):
+        notice(f"{run_dir} has no checkpoint (stopped before its first one); starting it again from step 0")
+        # What the stopped attempt produced; config, args and command.txt are rewritten or appended to.
+        for name in ("evaluations.npz", "tb", CHECKPOINTS):
+            target = run_dir / name
+            if target.is_dir():
+                shutil.rmtree(target)
+            else:
+                target.unlink(missing_ok=True)
+    elif resume:
+        notice(f"--resume: {run_dir} has no checkpoint yet; starting from step 0")
+    return None, False
+
+
 def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs", resume=False,
           hyperparams=None, progress=True, command=None, n_envs=None, report=None) -> Path:
-    """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base."""
+    """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base.
+
+    ``steps`` is the total number of environment steps (summed over the vector env). Raises
+    ``ValueError`` for bad input, ``FileExistsError`` rather than overwriting, before writing anything.
+    """
     if base == "__default__":
         base = get_spec(env_id).headline_baseline
     validate(env_id, algo, base)
+    seed = seed_number("seed", seed)
+    source = f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]"
+    hp = resolve_hyperparams(algo, env_id, hyperparams)
+    if steps is None and "n_timesteps" not in hp:
+        raise ValueError(f"no --steps given and {source} has no n_timesteps")
+    total = whole_number("steps", steps) if steps is not None else hp["n_timesteps"]
+    n = whole_number("n_envs", n_envs) if n_envs is not None else hp.get("n_envs", RUN_DEFAULTS["n_envs"])
+    check_combination(algo, hp, n, source)
+    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
+    run = {**RUN_DEFAULTS, **hp}
     import numba
     import torch
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.noise import NormalActionNoise
-    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from continuum_gym.agents.residual import ActorBurnIn, zero_init_residual
+    from continuum_gym.agents.checkpoint import (
+        CHECKPOINTS,
+        clean_temporary,
+        model_files,
+        remove_legacy_files,
+        write_unit,
+    )
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
 
     # Runs are parallelised by process (--parallel); one thread each keeps them from fighting.
     torch.set_num_threads(1)
     numba.set_num_threads(1)
-    hp = load_hyperparams(algo, env_id, hyperparams)
-    total = int(float(steps if steps is not None else hp["n_timesteps"]))
-    run_dir = Path(out) / run_name(env_id, algo, base, seed)
-    checkpoint = run_dir / "checkpoints" / "latest.zip"
-    if run_dir.exists() and any(run_dir.iterdir()) and not resume:
-        raise FileExistsError(f"{run_dir} exists; pass --resume to continue it (nothing is overwritten)")
-    if resume and not checkpoint.exists():
-        raise FileNotFoundError(f"--resume: no checkpoint at {checkpoint}")
+    env_kwargs = dict(run["env_kwargs"] or {})
+    env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
+    try:  # the environment checks its own keywords; still nothing written
+        venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{source}: env_kwargs: {error}") from None
     run_dir.mkdir(parents=True, exist_ok=True)
-    env_kwargs = dict(hp.get("env_kwargs") or {})
-    env_kwargs.update(base_controller=base, residual_scale=float(hp.get("residual_scale", 0.3)))
-    n = int(n_envs or hp.get("n_envs", 16))
-    venv = VecMonitor(ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs))
+    with _exclusive(run_dir):
+        unit, done = _starting_point(run_dir, resume, total)
+        if done:
+            return run_dir
+        clean_temporary(run_dir / CHECKPOINTS)
+        for stale in temporary_files(run_dir):
+            stale.unlink()
+        model, venv, saver, callbacks = _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir,
+                                               unit, report)
+        config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
+                  "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
+                  "env_config": _base_vec_env(venv).core.config.to_dict(), "continuum_gym_version": _version(),
+                  "git_commit": _git_commit(), "python": sys.version.split()[0]}
+        write_text_atomic(run_dir / "config.yml", yaml.safe_dump(config, sort_keys=False))
+        start = f"resume from step {unit.step}" if unit is not None else "step 0"
+        write_text_atomic(run_dir / "args.yml", yaml.safe_dump({"env": env_id, "algo": algo, "base": base or "none",
+                                                                "seed": seed, "steps": total, "out": str(out),
+                                                                "resume": resume, "start": start}, sort_keys=False))
+        command_line = command or " ".join(shlex.quote(a) for a in sys.argv)
+        previous = (run_dir / "command.txt").read_text() if (run_dir / "command.txt").is_file() else ""
+        write_text_atomic(run_dir / "command.txt", previous + command_line + "\n")
+        if unit is not None and unit.legacy:
+            # Re-publish the old single-file checkpoint as a verified unit, then drop the old files.
+            files = {**model_files(model), **saver.extra_files()}
+            write_unit(run_dir / CHECKPOINTS, unit.step, files, saver.extra_state())
+            remove_legacy_files(run_dir / CHECKPOINTS)
+        try:
+            remaining = total - model.num_timesteps
+            if remaining > 0:
+                from stable_baselines3.common.callbacks import CallbackList
+
+                model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
+                            reset_num_timesteps=unit is None, tb_log_name="tb", progress_bar=progress)
+                saver.save()
+            save_model_atomic(model, run_dir / "model.zip")
+        finally:
+            venv.close()
+    return run_dir
+
+
+def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit, report):
+    """Model (new or from ``unit``), wrapped env and callbacks [burn-in, checkpoints, evaluation]."""
+    from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from continuum_gym.agents.checkpoint import BURN_IN_ACTOR, CHECKPOINTS, NORMALIZER, CheckpointCallback, load_model
+    from continuum_gym.agents.residual import ActorBurnIn, actor_parameters, zero_init_residual
+
+    venv = VecMonitor(venv)
     venv.seed(seed)
-    normalizer_path = run_dir / "checkpoints" / "vecnormalize.pkl"
-    if hp.get("normalize_reward", False):
+    if run["normalize_reward"]:
         # Returns of long episodes reach the hundreds; the critic learns scaled returns. Observations are
         # already normalised by the environment, and the policy never needs these statistics at test time.
-        if resume and normalizer_path.exists():
-            venv = VecNormalize.load(str(normalizer_path), venv)
-        else:
-            venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=float(hp.get("gamma", 0.99)))
-    algo_kwargs = {k: linear_schedule(v, k) if k in SCHEDULE_KEYS else v for k, v in hp.items() if k not in RUN_KEYS}
-    if algo == "td3" and hp.get("action_noise_std"):
-        dim = venv.action_space.shape[0]
-        algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), float(hp["action_noise_std"]) * np.ones(dim))
+        saved = unit.file(NORMALIZER) if unit is not None else None
+        venv = VecNormalize.load(str(saved), venv) if saved else VecNormalize(
+            venv, norm_obs=False, norm_reward=True, gamma=float(run.get("gamma", 0.99)))
     cls = _algo_class(algo)
-    if resume:
-        model = cls.load(checkpoint, env=venv, tensorboard_log=str(run_dir / "tb"))
-        if isinstance(model, OffPolicyAlgorithm) and (run_dir / "checkpoints" / "replay_buffer.pkl").exists():
-            model.load_replay_buffer(run_dir / "checkpoints" / "replay_buffer.pkl")
+    if unit is not None:
+        model = load_model(unit, cls, venv, device="cpu", tensorboard_log=str(run_dir / "tb"))
+        # SB3's load reseeds with the run's seed, which would replay step 0's task sequence: continue
+        # with a stream of its own, the same for every resume from this unit.
+        model.set_random_seed(int(np.random.SeedSequence([seed, unit.step]).generate_state(1)[0] % 2**31))
+        state = {} if unit.legacy else unit.state()
     else:
-        model = cls(hp.get("policy", "MlpPolicy"), venv, seed=seed, verbose=0, device="cpu",
+        algo_kwargs = {k: _algo_value(k, v) for k, v in run.items() if k in _algo_keys(cls)}
+        if algo == "td3" and run.get("action_noise_std"):
+            dim = venv.action_space.shape[0]
+            sigma = float(run["action_noise_std"]) * np.ones(dim)
+            algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), sigma)
+        model = cls(run.get("policy", "MlpPolicy"), venv, seed=seed, verbose=0, device="cpu",
                     tensorboard_log=str(run_dir / "tb"), **algo_kwargs)
         if base is not None:
             zero_init_residual(model)
-    config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
-              "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
-              "env_config": _base_vec_env(venv).core.config.to_dict(),
-              "continuum_gym_version": _version(), "git_commit": _git_commit(), "python": sys.version.split()[0]}
-    write_text_atomic(run_dir / "config.yml", yaml.safe_dump(config, sort_keys=False))
-    write_text_atomic(run_dir / "args.yml", yaml.safe_dump({"env": env_id, "algo": algo, "base": base or "none",
-                                                            "seed": seed, "steps": total, "out": str(out),
-                                                            "resume": resume}, sort_keys=False))
-    command_line = command or " ".join(shlex.quote(a) for a in sys.argv)
-    with open(run_dir / "command.txt", "a") as handle:
-        handle.write(command_line + "\n")
-    saver = AtomicCheckpoint.make(run_dir, int(hp.get("checkpoint_freq", 100000)))
-    callbacks = [saver, make_eval_callback(env_id, dict(env_kwargs), run_dir, int(hp.get("eval_freq", 100000)),
-                                           int(hp.get("n_eval_episodes", 16)), report)]
-    if base is not None and int(hp.get("burn_in_steps", 0)) > 0 and not resume:
-        callbacks.append(ActorBurnIn(int(hp["burn_in_steps"])))
-    remaining = total - model.num_timesteps
-    if remaining > 0:
-        model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume,
-                    tb_log_name="tb", progress_bar=progress)
-        saver.save()
-    save_model_atomic(model, run_dir / "model.zip")
-    venv.close()
-    return run_dir
+        state = {}
+    history = state.get("evaluations") if unit is None or not unit.legacy else _history_until(
+        run_dir / "evaluations.npz", unit.step)
+    evaluator = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
+                                   int(run["n_eval_episodes"]), report, history=history)
+    if unit is not None:
+        evaluator.write()  # the curve as of the checkpoint: rows of the lost stretch go
+    burn_steps = int(run["burn_in_steps"]) if base is not None else 0
+    burn_in = None
+    if burn_steps > 0:
+        snapshot = None
+        if unit is not None and unit.file(BURN_IN_ACTOR):
+            snapshot = ActorBurnIn.load_snapshot(unit.file(BURN_IN_ACTOR))
+        elif unit is not None and unit.legacy:
+            snapshot = [p.detach().clone() for p in actor_parameters(model)]
+        burn_in = ActorBurnIn(burn_steps, snapshot=snapshot)
+    elapsed_before = float(state.get("elapsed_s", 0.0))
+    started = time.monotonic()
+
+    def extra_state() -> dict:
+        return {"algo": algo, "seed": seed, "total_timesteps": total, "elapsed_s": elapsed_before + time.monotonic()
+                - started, "evaluations": evaluator.records(), "burn_in_steps": burn_steps}
+
+    def extra_files() -> dict:
+        if burn_in is not None and model.num_timesteps <= burn_steps:
+            return {BURN_IN_ACTOR: burn_in.save_snapshot}
+        return {}
+
+    saver = CheckpointCallback(run_dir / CHECKPOINTS, int(run["checkpoint_freq"]), float(run["checkpoint_minutes"]),
+                               int(run["keep_checkpoints"]), state=extra_state, files=extra_files)
+    # Burn-in first: at a rollout start it restores the actor before the checkpoint is written.
+    callbacks = ([burn_in] if burn_in is not None else []) + [saver, evaluator]
+    return model, venv, saver, callbacks
+
+
+def _algo_value(key, value):
+    """A checked hyperparameter as the algorithm takes it (YAML has lists, SB3 wants a train_freq tuple)."""
+    if key in SCHEDULE_KEYS:
+        return linear_schedule(value, key)
+    if key == "train_freq" and isinstance(value, list):
+        return tuple(value)
+    return value
+
+
+def _algo_keys(cls) -> set:
+    from continuum_gym.agents.run_inputs import algorithm_parameters
+
+    return set(algorithm_parameters(cls)) - {"policy"}
 
 
 def _base_vec_env(venv):
@@ -282,18 +458,20 @@ def _version():
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    # Numbers are parsed in run(), so that a bad one gets the same one-line message as a bad hyperparameter.
     parser.add_argument("--env", required=True, help=f"environment id: {sorted(ENV_SPECS)}")
     parser.add_argument("--algo", default="ppo", help=f"one of {list(ALGOS)} (default ppo)")
     parser.add_argument("--base", default=None,
                         help="base controller name, or 'none' for pure RL (default: the env's first baseline)")
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--seed", type=int, default=0)
-    group.add_argument("--seeds", type=int, nargs="+", help="several seeds, one run each")
-    parser.add_argument("--parallel", type=int, default=1, help="with --seeds: number of runs at once (processes)")
-    parser.add_argument("--steps", type=float, default=None, help="total environment steps (default: the YAML's)")
-    parser.add_argument("--n-envs", type=int, default=None, help="native vector env batch size (default: the YAML's)")
+    group.add_argument("--seed", default="0", help="random seed, an integer >= 0 (default 0)")
+    group.add_argument("--seeds", nargs="+", help="several seeds, one run each")
+    parser.add_argument("--parallel", default="1", help="with --seeds: number of runs at once (processes)")
+    parser.add_argument("--steps", default=None, help="total environment steps, >= 1 (default: the YAML's)")
+    parser.add_argument("--n-envs", default=None, help="native vector env batch size, >= 1 (default: the YAML's)")
     parser.add_argument("--out", default="runs", help="parent directory of run directories (default: runs)")
-    parser.add_argument("--resume", action="store_true", help="continue from the run's latest checkpoint")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from the run's newest intact checkpoint (a run without one starts again)")
     parser.add_argument("--hyperparams", default=None, help="YAML file keyed by env id (default: the packaged one)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -302,27 +480,32 @@ def run(args) -> int:
     base = None if (args.base or "").lower() == "none" else (args.base or "__default__")
     try:
         validate(args.env, args.algo, None if base == "__default__" else base)
+        seeds = [seed_number("--seeds", s) for s in args.seeds] if args.seeds else [seed_number("--seed", args.seed)]
+        if len(set(seeds)) != len(seeds):
+            raise ValueError(f"--seeds must be distinct (one run directory each); got {args.seeds}")
+        parallel = whole_number("--parallel", args.parallel)
+        steps = whole_number("--steps", args.steps) if args.steps is not None else None
+        n_envs = whole_number("--n-envs", args.n_envs) if args.n_envs is not None else None
+        output_directory("--out", args.out)
+        resolve_hyperparams(args.algo, args.env, args.hyperparams)  # once, before any run starts
     except ValueError as error:
         print(f"continuum-gym train: {error}", file=sys.stderr)
         return 2
-    seeds = args.seeds if args.seeds else [args.seed]
     command = "continuum-gym " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    jobs = []
-    for seed in seeds:
-        jobs.append(dict(env_id=args.env, algo=args.algo, base=base, seed=seed, steps=args.steps, out=args.out,
-                         resume=args.resume, hyperparams=args.hyperparams, progress=not args.no_progress,
-                         command=command, n_envs=args.n_envs))
+    jobs = [dict(env_id=args.env, algo=args.algo, base=base, seed=seed, steps=steps, out=args.out, resume=args.resume,
+                 hyperparams=args.hyperparams, progress=not args.no_progress, command=command, n_envs=n_envs)
+            for seed in seeds]
     try:
-        if args.parallel > 1 and len(jobs) > 1:
+        if parallel > 1 and len(jobs) > 1:
             from concurrent.futures import ProcessPoolExecutor
 
-            with ProcessPoolExecutor(args.parallel) as pool:
+            with ProcessPoolExecutor(parallel) as pool:
                 for path in pool.map(_train_job, jobs):
                     print(f"finished {path}")
         else:
             for job in jobs:
                 print(f"finished {_train_job(job)}")
-    except (ValueError, FileExistsError, FileNotFoundError) as error:
+    except (ValueError, FileExistsError, FileNotFoundError, RunBusyError) as error:
         print(f"continuum-gym train: {error}", file=sys.stderr)
         return 2
     return 0
