@@ -97,10 +97,10 @@ def frames(q, robot, ws):
     g_base[0, 1] = 0.0
     g_base[0, 2] = q[2 * n]
     for j in range(n):
-        phi = q[2 * j] - HALF_PI
+        bend = HALF_PI - q[2 * j]
         delta = q[2 * j + 1]
-        segment_position(phi, delta, robot.lengths[j], p_local)
-        segment_rotation(phi, delta, Q)
+        segment_position(bend, delta, robot.lengths[j], p_local)
+        segment_rotation(bend, delta, Q)
         for a in range(3):
             acc = g_base[j, a]
             for b in range(3):
@@ -130,10 +130,14 @@ def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
                 Jw[a, col] = 0.0
     Jv[2, dof - 1] = 1.0
     for k in range(segment + 1):
-        phi = q[2 * k] - HALF_PI
+        bend = HALF_PI - q[2 * k]
         delta = q[2 * k + 1]
         s = sigma if k == segment else 1.0
-        segment_jacobian(phi, delta, robot.lengths[k], s, jv, jw)
+        segment_jacobian(bend, delta, robot.lengths[k], s, jv, jw)
+        # q holds theta = pi/2 - bend: its column is minus the bend column
+        for a in range(3):
+            jv[a, 0] = -jv[a, 0]
+            jw[a, 0] = -jw[a, 0]
         # Lever arm from the point back to the end of this (whole) proximal segment.
         if k == segment:
             arm0 = 0.0
@@ -171,8 +175,8 @@ def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
 def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
     R_base, g_base, p_local = ws.R_base, ws.g_base, ws.p_local
-    phi = q[2 * segment] - HALF_PI
-    segment_position(sigma * phi, q[2 * segment + 1], sigma * robot.lengths[segment], p_local)
+    bend = HALF_PI - q[2 * segment]
+    segment_position(sigma * bend, q[2 * segment + 1], sigma * robot.lengths[segment], p_local)
     for a in range(3):
         acc = g_base[segment, a]
         for b in range(3):

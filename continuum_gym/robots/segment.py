@@ -1,8 +1,9 @@
-"""One constant-curvature continuum segment, as compiled scalar kernels.
+"""One constant-curvature continuum segment, as compiled scalar kernels: the one segment model of both robots.
 
-Both papers use the same segment model (paper-notes §2.1: theta_001 = pi/2 - theta_000). The kernels here
-use the bend variable ``phi`` of paper-notes §1.2, phi = theta_000 - pi/2 = -theta_001, so that phi = 0 is
-straight in both conventions and a bend phi < 0 leans toward (cos delta, -sin delta, 0) of the base frame.
+Both papers use the same segment model (paper-notes §2.1: theta_001 = pi/2 - theta_000). The kernels take
+the *bend* angle, bend = theta_001 = pi/2 - theta_000 (0 straight, > 0 leaning toward (cos delta, -sin delta, 0)
+of the base frame), and compute 1 - cos through the half angle, so no digit is lost to cancellation
+near straight. The MBCR (``mbcr.py``) and the continuum endoscope (``endoscope.py``) both build on them.
 
 Each kernel works on one segment and writes into caller-provided arrays, so the robot kernels can
 call them inside their own compiled loops without allocating.
@@ -17,125 +18,40 @@ from numba import njit
 
 from continuum_gym.validation import as_finite, positive
 
-# Below this |phi| the closed forms lose digits to cancellation; the series error at the switch is < 1e-11.
+# Below this |bend| the closed forms lose digits to cancellation; the series error at the switch is < 1e-11.
 SERIES_SWITCH = 2e-3
 
 
 @njit(cache=True, inline="always")
-def chi_functions(phi):
-    """Return (chi1, chi2, chi3, sinc) of paper-notes §1.2 at bend variable ``phi`` (rad).
+def bend_terms(bend):
+    """Return ``s, omc, a, b, da, db`` of a bend angle (rad; 0 is straight).
 
-    chi3 = (cos phi - 1)/phi is the lateral shape factor, sinc = sin(phi)/phi the axial one,
-    chi1 = d chi3/d phi and chi2 = d sinc/d phi. Series of paper-notes §1.4 near phi = 0.
+    ``s = sin(bend)``, ``omc = 1 - cos(bend)`` (through the half angle: no cancellation near 0),
+    ``a = (1 - cos)/bend`` (the lateral shape factor), ``b = sin/bend`` (the axial one) and their
+    derivatives ``da``, ``db`` in the bend. Below ``SERIES_SWITCH`` the series of paper-notes §1.4 /
+    §2.2 are used, so all are exact and finite at a straight segment.
     """
-    if abs(phi) < SERIES_SWITCH:
-        p2 = phi * phi
-        p4 = p2 * p2
-        chi1 = -0.5 + p2 / 8.0 - p4 / 144.0
-        chi2 = phi * (-1.0 / 3.0 + p2 / 30.0 - p4 / 840.0)
-        chi3 = phi * (-0.5 + p2 / 24.0 - p4 / 720.0)
-        sinc = 1.0 - p2 / 6.0 + p4 / 120.0
-    else:
-        c = math.cos(phi)
-        s = math.sin(phi)
-        p2 = phi * phi
-        chi1 = (1.0 - c - phi * s) / p2
-        chi2 = (phi * c - s) / p2
-        chi3 = (c - 1.0) / phi
-        sinc = s / phi
-    return chi1, chi2, chi3, sinc
-
-
-@njit(cache=True, inline="always")
-def segment_position(phi, delta, length, out):
-    """End-disk position in the segment base frame (m): eq (8) of paper 000 / eq (3) of paper 001."""
-    _, _, chi3, sinc = chi_functions(phi)
-    cd = math.cos(delta)
-    sd = math.sin(delta)
-    out[0] = length * cd * chi3
-    out[1] = -length * sd * chi3
-    out[2] = length * sinc
-
-
-@njit(cache=True, inline="always")
-def segment_rotation(phi, delta, out):
-    """End-disk rotation Rz(-delta) Ry(-phi) Rz(delta) (eq 6 of paper 000, eq 4 corrected of paper 001)."""
-    cd = math.cos(delta)
-    sd = math.sin(delta)
-    cp = math.cos(phi)
-    sp = math.sin(phi)
-    one_minus = 1.0 - cp
-    out[0, 0] = cd * cd * cp + sd * sd
-    out[0, 1] = cd * sd * one_minus
-    out[0, 2] = -sp * cd
-    out[1, 0] = cd * sd * one_minus
-    out[1, 1] = sd * sd * cp + cd * cd
-    out[1, 2] = sp * sd
-    out[2, 0] = sp * cd
-    out[2, 1] = -sp * sd
-    out[2, 2] = cp
-
-
-@njit(cache=True, inline="always")
-def segment_jacobian(phi, delta, length, sigma, jv, jw):
-    """Twist of the point at arc fraction ``sigma`` per (d phi_end, d delta), in the segment base frame.
-
-    With sigma = 1 this is eq (3) of paper 000 with the phi-derivative sign (d/d theta_000 = d/d phi).
-    For sigma < 1 it is paper-notes §1.2 "points on the body": chi functions at sigma*phi, and the phi
-    column carries the extra factor sigma (d phi_sigma / d phi = sigma). ``jv`` and ``jw`` are (3, 2).
-    """
-    chi1, chi2, chi3, _ = chi_functions(sigma * phi)
-    cd = math.cos(delta)
-    sd = math.sin(delta)
-    ls = sigma * length
-    ls2 = sigma * ls
-    jv[0, 0] = ls2 * cd * chi1
-    jv[1, 0] = -ls2 * sd * chi1
-    jv[2, 0] = ls2 * chi2
-    jv[0, 1] = -ls * sd * chi3
-    jv[1, 1] = -ls * cd * chi3
-    jv[2, 1] = 0.0
-    sp = math.sin(sigma * phi)
-    cp = math.cos(sigma * phi)
-    jw[0, 0] = -sd * sigma
-    jw[1, 0] = -cd * sigma
-    jw[2, 0] = 0.0
-    jw[0, 1] = -cd * sp
-    jw[1, 1] = sd * sp
-    jw[2, 1] = cp - 1.0
-
-
-# Xu's convention (theta = -phi, 0 straight): the terms of eqs (3)-(6) of paper 001.
-@njit(cache=True, inline="always")
-def bend_terms(theta):
-    """Return ``s, omc, a, b, da, db`` of a bending angle ``theta`` (rad).
-
-    ``s = sin(theta)``, ``omc = 1 - cos(theta)`` (via the half angle, no cancellation),
-    ``a = (1 - cos)/theta``, ``b = sin/theta`` and their derivatives ``da``, ``db`` in theta.
-    Below ``SERIES_SWITCH`` the series of paper-notes §2.2 are used, so all are exact and finite
-    at theta = 0.
-    """
-    sh = math.sin(0.5 * theta)
-    ch = math.cos(0.5 * theta)
+    sh = math.sin(0.5 * bend)
+    ch = math.cos(0.5 * bend)
     s = 2.0 * sh * ch
     omc = 2.0 * sh * sh
-    if abs(theta) < SERIES_SWITCH:
-        t2 = theta * theta
-        a = theta * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0))
+    if abs(bend) < SERIES_SWITCH:
+        t2 = bend * bend
+        a = bend * (0.5 - t2 * (1.0 / 24.0 - t2 / 720.0))
         b = 1.0 - t2 * (1.0 / 6.0 - t2 / 120.0)
         da = 0.5 - t2 * (1.0 / 8.0 - t2 / 144.0)
-        db = -theta * (1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 / 840.0))
+        db = -bend * (1.0 / 3.0 - t2 * (1.0 / 30.0 - t2 / 840.0))
     else:
-        a = omc / theta
-        b = s / theta
-        da = (s - a) / theta  # sin/theta - (1 - cos)/theta^2
-        db = (1.0 - omc - b) / theta  # cos/theta - sin/theta^2
+        a = omc / bend
+        b = s / bend
+        da = (s - a) / bend  # sin/bend - (1 - cos)/bend^2
+        db = (1.0 - omc - b) / bend  # cos/bend - sin/bend^2
     return s, omc, a, b, da, db
 
 
 @njit(cache=True, inline="always")
 def bend_rotation(s, omc, cd, sd, R):
-    """Write ``tb_R_te = Rz(-delta) Ry(theta) Rz(delta)`` (eq 4 corrected, paper-notes §2.3 item 2) into R."""
+    """Write ``Rz(-delta) Ry(bend) Rz(delta)`` (eq 6 of paper 000, eq 4 corrected of paper 001) into R."""
     R[0, 0] = 1.0 - omc * cd * cd
     R[0, 1] = omc * cd * sd
     R[0, 2] = s * cd
@@ -145,6 +61,59 @@ def bend_rotation(s, omc, cd, sd, R):
     R[2, 0] = -s * cd
     R[2, 1] = s * sd
     R[2, 2] = 1.0 - omc
+
+
+@njit(cache=True, inline="always")
+def segment_position(bend, delta, length, out):
+    """End-disk position in the segment base frame (m): eq (8) of paper 000 / eq (3) of paper 001."""
+    _, _, a, b, _, _ = bend_terms(bend)
+    cd = math.cos(delta)
+    sd = math.sin(delta)
+    out[0] = length * cd * a
+    out[1] = -length * sd * a
+    out[2] = length * b
+
+
+@njit(cache=True, inline="always")
+def segment_rotation(bend, delta, out):
+    """End-disk rotation ``Rz(-delta) Ry(bend) Rz(delta)`` in the segment base frame."""
+    s, omc, _, _, _, _ = bend_terms(bend)
+    bend_rotation(s, omc, math.cos(delta), math.sin(delta), out)
+
+
+@njit(cache=True, inline="always")
+def segment_jacobian(bend, delta, length, sigma, jv, jw):
+    """Twist of the point at arc fraction ``sigma`` per (d bend_end, d delta), in the segment base frame.
+
+    With sigma = 1 this is eqs (5)-(6) of paper 001 (and eq (3) of paper 000 up to the sign of the
+    bend column, since theta_000 = pi/2 - bend). For sigma < 1 it is paper-notes §1.2 "points on the
+    body": the terms at sigma * bend, and the bend column carries the extra factor sigma
+    (d bend_sigma / d bend = sigma). ``jv`` and ``jw`` are (3, 2).
+    """
+    s, omc, a, _, da, db = bend_terms(sigma * bend)
+    cd = math.cos(delta)
+    sd = math.sin(delta)
+    ls = sigma * length
+    ls2 = sigma * ls
+    jv[0, 0] = ls2 * cd * da
+    jv[1, 0] = -ls2 * sd * da
+    jv[2, 0] = ls2 * db
+    jv[0, 1] = -ls * sd * a
+    jv[1, 1] = -ls * cd * a
+    jv[2, 1] = 0.0
+    jw[0, 0] = sd * sigma
+    jw[1, 0] = cd * sigma
+    jw[2, 0] = 0.0
+    jw[0, 1] = cd * s
+    jw[1, 1] = -sd * s
+    jw[2, 1] = -omc
+
+
+@njit(cache=True)
+def _pose_batch(bend, delta, length, p, R):
+    for i in range(bend.shape[0]):
+        segment_position(bend[i], delta[i], length, p[i])
+        segment_rotation(bend[i], delta[i], R[i])
 
 
 def segment_tip_pose(phi, delta, length: float) -> tuple[np.ndarray, np.ndarray]:
@@ -169,9 +138,7 @@ def segment_tip_pose(phi, delta, length: float) -> tuple[np.ndarray, np.ndarray]
     flat_delta = delta.reshape(-1)
     p = np.empty((flat_phi.size, 3))
     R = np.empty((flat_phi.size, 3, 3))
-    for i in range(flat_phi.size):
-        segment_position(flat_phi[i], flat_delta[i], length, p[i])
-        segment_rotation(flat_phi[i], flat_delta[i], R[i])
+    _pose_batch(np.ascontiguousarray(-flat_phi), np.ascontiguousarray(flat_delta), length, p, R)
     return p.reshape(phi.shape + (3,)), R.reshape(phi.shape + (3, 3))
 
 
