@@ -17,7 +17,7 @@ from continuum_gym.robots.endoscope import (
 )
 from tests.conftest import load_reference
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 ENDOSCOPE_REF = load_reference()["endoscope"]
 
 

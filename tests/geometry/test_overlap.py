@@ -364,7 +364,7 @@ def test_numba_entry_point_callable_from_compiled_code():
 
 
 def test_numpy_clipping_reference_agrees():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "numpy_reference_overlap.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "numpy_reference_overlap.py"
     spec = importlib.util.spec_from_file_location("numpy_reference_overlap", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
