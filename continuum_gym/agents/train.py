@@ -44,7 +44,11 @@ from continuum_gym.agents.run_inputs import (
     whole_number,
 )
 from continuum_gym.envs.spec import ENV_SPECS, get_spec
-from continuum_gym.evaluation.io import temporary_files, write_bytes_atomic, write_text_atomic
+from continuum_gym.evaluation.io import (
+    temporary_files,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 
 ALGOS = ("ppo", "sac", "td3")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
@@ -239,7 +243,12 @@ def _exclusive(run_dir: Path):
 def _starting_point(run_dir: Path, resume: bool, total: int):
     """``(unit, done)``: the checkpoint unit to start from (``None``: step 0) after refusing what must not
     be overwritten; ``done`` when a finished run already has ``total`` steps."""
-    from continuum_gym.agents.checkpoint import CHECKPOINTS, discard, find_resumable, legacy_unit
+    from continuum_gym.agents.checkpoint import (
+        CHECKPOINTS,
+        discard,
+        find_resumable,
+        legacy_unit,
+    )
 
     folder = run_dir / CHECKPOINTS
     finished = (run_dir / "model.zip").is_file()
@@ -366,8 +375,18 @@ def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from continuum_gym.agents.checkpoint import BURN_IN_ACTOR, CHECKPOINTS, NORMALIZER, CheckpointCallback, load_model
-    from continuum_gym.agents.residual import ActorBurnIn, actor_parameters, zero_init_residual
+    from continuum_gym.agents.checkpoint import (
+        BURN_IN_ACTOR,
+        CHECKPOINTS,
+        NORMALIZER,
+        CheckpointCallback,
+        load_model,
+    )
+    from continuum_gym.agents.residual import (
+        ActorBurnIn,
+        actor_parameters,
+        zero_init_residual,
+    )
 
     venv = VecMonitor(venv)
     venv.seed(seed)

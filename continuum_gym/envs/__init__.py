@@ -1,7 +1,27 @@
-"""Gymnasium environments: registration, single envs, native vector envs, the SB3 adapter."""
+"""Gymnasium environments: registration, single envs, native vector envs, the SB3 adapter.
+
+Public names load on first use (``from continuum_gym.envs import TipTrajectory``), so that importing
+the package registers the ids without compiling or loading any kernel.
+"""
+
+import importlib
 
 from continuum_gym.envs.registration import ENV_IDS, register_envs
 
 register_envs()
 
-__all__ = ["ENV_IDS", "register_envs"]
+_EXPORTS = {
+    "OcclusionConfig": "config", "ViewTrackingConfig": "config", "EnvConfig": "config",
+    "ENV_SPECS": "spec", "EnvSpec": "spec", "get_spec": "spec",
+    "TipTrajectory": "trajectories", "DaVinciTrajectory": "trajectories",
+    "OcclusionAvoidanceEnv": "occlusion", "OcclusionAvoidanceVectorEnv": "occlusion", "OcclusionCore": "occlusion",
+    "ViewTrackingEnv": "view_tracking", "ViewTrackingVectorEnv": "view_tracking", "ViewTrackingCore": "view_tracking",
+    "ContinuumSB3VecEnv": "sb3",
+}
+__all__ = ["ENV_IDS", "register_envs", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -108,8 +108,9 @@ class BatchedCore:
 
     spec = None
     config_class: type = None
-    reward_names: tuple = ()
+    builtin_reward_names: tuple = ()
     info_fields: tuple = ()
+    metric_columns: dict = {}  # info name -> column of ``metrics``, for numpy reward terms
     num_envs: int
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
@@ -143,10 +144,89 @@ class BatchedCore:
         """Returns (rewards, terminated, truncated) arrays and fills ``self.obs``."""
         raise NotImplementedError
 
+    def _setup_rewards(self) -> None:
+        """Reward names and slots: the built-in terms, then the registered compiled, then numpy terms."""
+        from continuum_gym import registry
+
+        registered = list(registry.REWARD_TERMS[self.spec.env_id].values())
+        self._compiled_terms = [t for t in registered if t.compiled]
+        self._numpy_terms = [t for t in registered if not t.compiled]
+        self.reward_names = (*self.builtin_reward_names, *(t.name for t in self._compiled_terms),
+                             *(t.name for t in self._numpy_terms))
+        self._make_slots()
+
+    def _make_slots(self) -> None:
+        """The compiled slots of the registered controller and reward terms (typed lists, rebuilt on unpickling)."""
+        from continuum_gym import registry
+        from continuum_gym.envs.custom import controller_slot, reward_slot
+
+        controllers = registry.CONTROLLERS[self.spec.env_id]
+        if self.base_controller is not None and self.base_controller not in self.spec.baselines \
+                and self.base_controller not in controllers:
+            raise ValueError(f"base_controller {self.base_controller!r} is not registered in this process: call "
+                             "continuum_gym.registry.register_controller before building or unpickling the env")
+        self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
+        self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
+
+    def __getstate__(self) -> dict:
+        # numba's typed lists do not pickle; the slots are rebuilt from the registry on unpickling
+        state = self.__dict__.copy()
+        state.pop("_custom", None)
+        state.pop("_reward_slot", None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._model = self.kernel_model()  # read-only robot arrays again (unpickled ones are writeable)
+        self._make_slots()
+
+    def kernel_model(self) -> tuple:  # pragma: no cover - interface
+        """The model bundles of the step kernels: the robot's and the controller's (and the cameras')."""
+        raise NotImplementedError
+
+    def _add_numpy_terms(self, actions: np.ndarray, active: np.ndarray) -> None:
+        """The registered numpy terms, once per batch step, on the rows that stepped."""
+        if not self._numpy_terms:
+            return
+        metrics = {name: self.metrics[:, column] for name, column in self.metric_columns.items()}
+        stepped = active != 0
+        first = len(self.builtin_reward_names) + len(self._compiled_terms)
+        for k, term in enumerate(self._numpy_terms):
+            values = np.asarray(term.fn(metrics, actions), dtype=np.float64).reshape(-1)
+            if values.shape != (self.num_envs,) or not np.all(np.isfinite(values[stepped])):
+                raise ValueError(f"reward term {term.name!r} must return {self.num_envs} finite values; got "
+                                 f"{values.shape} {values[:4]}")
+            weighted = self.weights[term.name] * values
+            self.terms[stepped, first + k] = weighted[stepped]
+            self.rewards[stepped] += weighted[stepped]
+
+    def desired(self, row: int, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Row's desired position (occlusion, m) or da Vinci configuration (view) and its rate at time t (s)."""
+        from continuum_gym.envs.common_kernels import trajectory_batch
+
+        dim = self.tasks.centre.shape[1]
+        p = np.empty((1, 1, dim))
+        v = np.empty((1, 1, dim))
+        trajectory_batch(self._tasks, np.array([row], dtype=np.int64), np.array([float(t)]), p, v)
+        return p[0, 0], v[0, 0]
+
+    def desired_rotation(self, row: int, t: float) -> np.ndarray:
+        """Row's desired tip orientation (3, 3) at time t (s)."""
+        from continuum_gym.envs.common_kernels import rotation_at
+
+        out = np.empty((3, 3))
+        rotation_at(self._tasks, row, float(t), out)
+        return out
+
     def _install_tasks(self, rows, fresh) -> None:
         """Copy freshly drawn task instances into ``rows`` and restart their episodes (state from the task)."""
-        for field in vars(fresh):
-            getattr(self.tasks, field)[rows] = getattr(fresh, field)
+        from continuum_gym.envs.common_kernels import task_arrays
+        from continuum_gym.envs.tasks import copy_rows, grown
+
+        if fresh.knot_capacity > self.tasks.knot_capacity:  # a longer recording than any before: grow every row
+            self.tasks = grown(self.tasks, fresh.knot_capacity)
+            self._tasks = task_arrays(self.tasks, self.limit)
+        copy_rows(self.tasks, rows, fresh)
         self.limit[rows] = fresh.duration
         if self.max_episode_steps is not None:
             self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
@@ -155,6 +235,8 @@ class BatchedCore:
         self.flags[rows] = 0
         self.terms[rows] = 0.0
         self.rewards[rows] = 0.0
+
+    reward_names: tuple = ()
 
     def reward_terms(self) -> dict:
         return {key: self.terms[:, k].copy() for k, key in enumerate(self.reward_names)}

@@ -1,17 +1,29 @@
-"""Compiled pieces both environments' step kernels share: trajectories, clipping, clamping."""
+"""Compiled pieces both environments' step kernels share: desired trajectories, clipping, clamping."""
 
 from __future__ import annotations
 
 import math
 from collections import namedtuple
 
+import numpy as np
 from numba import njit
 
-#: Task instances as arrays, for both environments: a trajectory as a sum of sines (centre, amp, omega,
-#: phase) of the desired tip position (occlusion) or of the da Vinci configuration (view tracking), the
-#: desired tip orientation R_des (occlusion; identity otherwise), the task's duration and the episode's
-#: step limit (both in control steps).
-TaskArrays = namedtuple("TaskArrays", ["centre", "amp", "omega", "phase", "R_des", "duration", "limit"])
+from continuum_gym.envs.trajectories import hermite_point
+from continuum_gym.robots.rotations import rotation_exp
+
+#: Task instances as arrays, for both environments (see ``envs.tasks.TaskBatch``): a trajectory of the
+#: desired tip position (occlusion) or of the da Vinci configuration (view tracking), either a sum of
+#: sines (centre, amp, omega, phase) or, where ``n_knots > 0``, a cubic Hermite spline (knot times,
+#: values, slopes; for the orientation rotation vectors relative to R_des); the desired tip orientation
+#: R_des; the task's duration and the episode's step limit (both in control steps).
+TaskArrays = namedtuple("TaskArrays", ["centre", "amp", "omega", "phase", "R_des", "duration", "limit", "n_knots",
+                                       "knot_t", "knot_x", "knot_m", "knot_r", "knot_rm"])
+
+
+def task_arrays(batch, limit) -> TaskArrays:
+    """The kernel bundle of a ``TaskBatch`` (the same arrays, not copies) and the episode step limits."""
+    return TaskArrays(batch.centre, batch.amp, batch.omega, batch.phase, batch.R_des, batch.duration, limit,
+                      batch.n_knots, batch.knot_t, batch.knot_x, batch.knot_m, batch.knot_r, batch.knot_rm)
 
 
 @njit(cache=True, inline="always")
@@ -28,12 +40,50 @@ def trajectory_point(centre, amp, omega, phase, t, p, v):
             v[a] += amp[k, a] * omega[k] * c
 
 
+@njit(cache=True, inline="always")
+def desired_point(tasks, i, t, p, v):
+    """Row i's desired position (or da Vinci configuration) and its rate at time t (s), into p and v."""
+    n = tasks.n_knots[i]
+    if n == 0:
+        trajectory_point(tasks.centre[i], tasks.amp[i], tasks.omega[i], tasks.phase[i], t, p, v)
+    else:
+        hermite_point(tasks.knot_t[i], tasks.knot_x[i], tasks.knot_m[i], n, t, p, v)
+
+
+@njit(cache=True, inline="always")
+def desired_rotation(tasks, i, t, w, w_rate, turn, out):
+    """Row i's desired orientation at time t: R_des for sine tasks, R_des exp([r(t)]) for splines.
+
+    Returns the array that holds it (``tasks.R_des[i]`` itself or ``out``); w, w_rate (3,), turn (3, 3) scratch.
+    """
+    n = tasks.n_knots[i]
+    if n == 0:
+        return tasks.R_des[i]
+    hermite_point(tasks.knot_t[i], tasks.knot_r[i], tasks.knot_rm[i], n, t, w, w_rate)
+    rotation_exp(w, turn)
+    R0 = tasks.R_des[i]
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R0[a, 0] * turn[0, b] + R0[a, 1] * turn[1, b] + R0[a, 2] * turn[2, b]
+    return out
+
+
 @njit(cache=True)
-def trajectory_batch(centre, amp, omega, phase, times, p_out, v_out):
-    """Desired positions/velocities (N, T, dim) of N trajectories at times (T,) (s); same code as the kernels."""
-    for i in range(centre.shape[0]):
+def rotation_at(tasks, row, t, out):
+    """Row's desired orientation at time t into out (3, 3) (the kernels' own computation)."""
+    w, w_rate, turn = np.empty(3), np.empty(3), np.empty((3, 3))
+    R = desired_rotation(tasks, row, t, w, w_rate, turn, out)
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = R[a, b]
+
+
+@njit(cache=True)
+def trajectory_batch(tasks, rows, times, p_out, v_out):
+    """Desired positions/velocities (len(rows), T, dim) of task rows at times (T,) (s); same code as the kernels."""
+    for k in range(rows.shape[0]):
         for j in range(times.shape[0]):
-            trajectory_point(centre[i], amp[i], omega[i], phase[i], times[j], p_out[i, j], v_out[i, j])
+            desired_point(tasks, rows[k], times[j], p_out[k, j], v_out[k, j])
 
 
 @njit(cache=True, inline="always")

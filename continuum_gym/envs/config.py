@@ -29,7 +29,7 @@ from continuum_gym.validation import (
     weights,
 )
 
-TASK_SPLITS = ("train", "test")
+TASK_SPLITS = ("train", "validation", "test")
 #: Task families of each environment (the papers' fixed tasks exist only in the test split).
 OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
 OCCLUSION_TEST_ONLY = ("circle",)
@@ -100,6 +100,8 @@ class EnvConfig:
             value = getattr(self, f.name)
             if hasattr(value, "to_dict"):
                 value = {"type": type(value).__name__, **value.to_dict()}
+            elif f.name == "task" and not isinstance(value, str):
+                value = {"type": "recorded", "description": self.task_source.describe()}
             elif isinstance(value, tuple):
                 value = list(value)
             elif isinstance(value, dict):
@@ -121,7 +123,39 @@ class EnvConfig:
 
     @classmethod
     def _build_object(cls, key: str, value: dict) -> Any:
-        raise ValueError(f"{cls.env_id}: argument {key!r} does not take an object")
+        """Rebuild a robot, cone or da Vinci endoscope from its ``to_dict()`` (recorded tasks cannot be)."""
+        from continuum_gym.geometry.lens_cone import LensCone
+        from continuum_gym.robots import (
+            ContinuumEndoscope,
+            DaVinciEndoscope,
+            MultiBackboneRobot,
+        )
+
+        kinds = {"MultiBackboneRobot": MultiBackboneRobot, "LensCone": LensCone, "DaVinciEndoscope": DaVinciEndoscope}
+        kind = value.pop("type")
+        if kind == "ContinuumEndoscope":
+            lower, upper = value.pop("joint_limits", (None, None))
+            limits = None if lower is None else ([-math.inf if v is None else v for v in lower],
+                                                 [math.inf if v is None else v for v in upper])
+            return ContinuumEndoscope(**value, joint_limits=limits)
+        if kind == "MultiBackboneRobot" and "lengths" in value:
+            value["lengths"] = tuple(value["lengths"])
+        if kind in kinds:
+            return kinds[kind](**value)
+        raise ValueError(f"{cls.env_id}: argument {key!r} was recorded as {kind!r}, which cannot be rebuilt from a "
+                         "config file; pass it again")
+
+    @property
+    def task_source(self):
+        """The ``TaskSource`` the task resolves to (a built-in family, recorded data or a registered family)."""
+        return self._task_source
+
+    @classmethod
+    def all_default_weights(cls) -> dict:
+        """The built-in reward terms' default weights and those of the terms registered for this env."""
+        from continuum_gym import registry
+
+        return {**cls.default_weights, **{name: term.weight for name, term in registry.REWARD_TERMS[cls.env_id].items()}}
 
     @classmethod
     def arguments_table(cls) -> str:
@@ -137,16 +171,21 @@ class EnvConfig:
 
 
 def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
+    from continuum_gym import registry
     from continuum_gym.envs.spec import ENV_SPECS
+    from continuum_gym.envs.tasks import resolve_task
 
     set_ = object.__setattr__
-    choice(config.task, tasks, "task")
+    source = resolve_task(config.task, config.env_id, tasks, config.env_id == OcclusionConfig.env_id)
+    set_(config, "_task_source", source)
     choice(config.task_split, TASK_SPLITS, "task_split")
-    if config.task in test_only and config.task_split != "test":
+    if source.test_only and config.task_split != "test":
         raise ValueError(f"task={config.task!r} is a fixed evaluation task of the paper: use task_split='test' "
                          f"(training draws from {[t for t in tasks if t not in test_only]})")
     if config.base_controller is not None:
-        choice(config.base_controller, ENV_SPECS[config.env_id].baselines, "base_controller")
+        choice(config.base_controller, (*ENV_SPECS[config.env_id].baselines,
+                                        *registry.controller_names(config.env_id)), "base_controller")
+    set_(config, "reward_weights", weights(config.reward_weights, config.all_default_weights(), high=MAX_REWARD_WEIGHT))
     set_(config, "residual_scale", number(config.residual_scale, "residual_scale", low=0.0, high=MAX_RESIDUAL_SCALE,
                                           low_open=True, unit="fraction of the action scale"))
     set_(config, "control_dt", number(config.control_dt, "control_dt", low=0.0, high=MAX_CONTROL_DT, low_open=True,
@@ -164,12 +203,14 @@ class OcclusionConfig(EnvConfig):
     default_weights: ClassVar[dict] = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0,
                                        "action": 0.01}
     residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
+    builtin_tasks: ClassVar[tuple] = OCCLUSION_TASKS
 
-    task: str = field(default="hold", metadata=spec(
+    task: Any = field(default="hold", metadata=spec(
         doc="`hold` (hold a paper-like start pose), `random` (smooth random tip trajectories, <= 12 mm), `mixed` "
-            "(even task ids hold, odd ids random), `circle` (the paper's task b; test split only)", type_name="str"))
-    task_split: str = field(default="train", metadata=spec(doc="`train` or `test`: disjoint task instances",
-                                                           type_name="str"))
+            "(even task ids hold, odd ids random), `circle` (the paper's task b; test split only), a registered "
+            "family's name, or recorded data: a `TipTrajectory` or a list of them", type_name="str or TipTrajectory(s)"))
+    task_split: str = field(default="train", metadata=spec(
+        doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
     base_controller: str | None = field(default="projected_gradient", metadata=spec(
         doc="residual base: `projected_gradient`, `minimum_norm`, or `None` (pure RL)", type_name="str or None"))
     residual_scale: float = field(default=0.3, metadata=spec(
@@ -198,24 +239,43 @@ class OcclusionConfig(EnvConfig):
                                                               type_name="float"))
     gamma_rate: float = field(default=3.0, metadata=spec(unit="rad/s", doc="|gamma_dot| limit (endoscope rotation)",
                                                          type_name="float"))
-    lens_model: str = field(default="literal", metadata=spec(
-        doc="`literal` or `physical` reading of the lens origin (paper-notes §1.3 item 7)", type_name="str"))
+    lens_model: str | None = field(default=None, metadata=spec(
+        doc="`literal` or `physical` reading of the lens origin (paper-notes §1.3 item 7); `None`: the cone's "
+            "(literal for the paper's)", type_name="str or None"))
     max_episode_steps: int | None = field(default=None, metadata=spec(
         doc="cap on the episode length in steps (`None`: the task's own duration)", type_name="int or None"))
+    robot: Any = field(default=None, metadata=spec(
+        doc="a `MultiBackboneRobot` (1-4 segments, any lengths and stiffness) or a registered robot's name; `None`: "
+            "the paper's 3 segments", type_name="MultiBackboneRobot, str or None"))
+    cone: Any = field(default=None, metadata=spec(
+        doc="a `LensCone` (channel offset d_o, lens tilt alpha, half-angle beta, lens model); `None`: the paper's",
+        type_name="LensCone or None"))
 
     def __post_init__(self) -> None:
+        from continuum_gym import registry
         from continuum_gym.baselines.occlusion import OcclusionLimits
+        from continuum_gym.geometry.lens_cone import LensCone
+        from continuum_gym.robots import MultiBackboneRobot
 
         set_ = object.__setattr__
+        set_(self, "robot", _resolve_robot(self.robot, MultiBackboneRobot, registry.ROBOTS[self.env_id]))
+        if self.cone is not None and not isinstance(self.cone, LensCone):
+            raise ValueError(f"cone must be a LensCone or None; got {describe(self.cone)}")
+        if self.lens_model is not None:
+            choice(self.lens_model, ("literal", "physical"), "lens_model")
+            if self.cone is not None and self.cone.lens_model != self.lens_model:
+                raise ValueError(f"lens_model={self.lens_model!r} contradicts cone.lens_model="
+                                 f"{self.cone.lens_model!r}: give one of them")
+        if self.cone is None:
+            set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
+        set_(self, "lens_model", self.cone.lens_model)
         _check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
         choice(self.residual_space, self.residual_spaces, "residual_space")
-        set_(self, "reward_weights", weights(self.reward_weights, self.default_weights, high=MAX_REWARD_WEIGHT))
         if self.visibility_guard is not None:
             if isinstance(self.visibility_guard, str):
                 raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "
                                  f"or None; got {self.visibility_guard!r}")
             set_(self, "visibility_guard", fraction(self.visibility_guard, "visibility_guard", allow_one=False))
-        choice(self.lens_model, ("literal", "physical"), "lens_model")
         limits = OcclusionLimits(max_bend=self.max_bend, insertion=self.insertion, bend_rate=self.bend_rate,
                                  plane_rate=self.plane_rate, insertion_rate=self.insertion_rate,
                                  gamma_rate=self.gamma_rate)
@@ -241,13 +301,15 @@ class ViewTrackingConfig(EnvConfig):
     default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
                                        "overlap_bonus": 0.0}
     residual_spaces: ClassVar[tuple] = ("joint", "target")
+    builtin_tasks: ClassVar[tuple] = VIEW_TASKS
 
-    task: str = field(default="random", metadata=spec(
+    task: Any = field(default="random", metadata=spec(
         doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "
-            "map's distribution off its grid), and the paper's `case1`, `case2`, `coverage` (test split only)",
-        type_name="str"))
-    task_split: str = field(default="train", metadata=spec(doc="`train` or `test`: disjoint task instances",
-                                                           type_name="str"))
+            "map's distribution off its grid), the paper's `case1`, `case2`, `coverage` (test split only), a "
+            "registered family's name, or recorded data: a `DaVinciTrajectory` or a list of them",
+        type_name="str or DaVinciTrajectory(s)"))
+    task_split: str = field(default="train", metadata=spec(
+        doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
     base_controller: str | None = field(default="dimension_reduced", metadata=spec(
         doc="residual base: `dimension_reduced`, `resolved_rate`, or `None` (pure RL)", type_name="str or None"))
     residual_scale: float = field(default=0.3, metadata=spec(
@@ -270,14 +332,27 @@ class ViewTrackingConfig(EnvConfig):
     observe_target: bool = field(default=False, metadata=spec(
         doc="append the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll] to the observation",
         type_name="bool"))
+    robot: Any = field(default=None, metadata=spec(
+        doc="a `ContinuumEndoscope` (lengths, joint limits) or a registered robot's name; `None`: the paper's",
+        type_name="ContinuumEndoscope, str or None"))
+    davinci: Any = field(default=None, metadata=spec(
+        doc="a `DaVinciEndoscope` (viewing angle alpha, view distance Le); `None`: the paper's 30-degree one",
+        type_name="DaVinciEndoscope or None"))
 
     def __post_init__(self) -> None:
+        from continuum_gym import registry
+        from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+
         set_ = object.__setattr__
+        set_(self, "robot", _resolve_robot(self.robot, ContinuumEndoscope, registry.ROBOTS[self.env_id]))
+        if self.davinci is None:
+            set_(self, "davinci", DaVinciEndoscope())
+        elif not isinstance(self.davinci, DaVinciEndoscope):
+            raise ValueError(f"davinci must be a DaVinciEndoscope or None; got {describe(self.davinci)}")
         _check_common(self, VIEW_TASKS, VIEW_TEST_ONLY)
         choice(self.residual_space, self.residual_spaces, "residual_space")
         if self.residual_space == "target" and self.base_controller is None:
             raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
-        set_(self, "reward_weights", weights(self.reward_weights, self.default_weights, high=MAX_REWARD_WEIGHT))
         if self.substeps != 1:
             raise ValueError(f"substeps must be 1 for ViewTracking (the paper's IK step is the control step); "
                              f"got {self.substeps!r}")
@@ -295,6 +370,20 @@ class ViewTrackingConfig(EnvConfig):
                 for k, v in enumerate(values)))
         set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
+
+
+def _resolve_robot(robot: Any, kind: type, registered: dict):
+    """A robot instance from an instance, a registered name or None (the paper's)."""
+    if robot is None:
+        return kind()
+    if isinstance(robot, str):
+        if robot not in registered:
+            raise ValueError(f"robot {robot!r} is not registered{closest(robot, registered)}; registered robots: "
+                             f"{sorted(registered)} (continuum_gym.registry.register_robot), or pass a {kind.__name__}")
+        return registered[robot]
+    if not isinstance(robot, kind):
+        raise ValueError(f"robot must be a {kind.__name__}, a registered robot's name or None; got {describe(robot)}")
+    return robot
 
 
 __all__ = ["EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]

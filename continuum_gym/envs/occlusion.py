@@ -13,7 +13,7 @@ from continuum_gym.envs.batched import (
     parallel_chunks,
     run_in_chunks,
 )
-from continuum_gym.envs.common_kernels import trajectory_batch
+from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import OcclusionConfig
 from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
 from continuum_gym.envs.occlusion_kernel import (
@@ -36,18 +36,12 @@ from continuum_gym.envs.occlusion_kernel import (
     OcclusionOutputs,
     OcclusionState,
     OcclusionStepParams,
-    TaskArrays,
     observation_dim,
     occlusion_observe_batch,
     occlusion_step_batch,
 )
 from continuum_gym.envs.spec import OCCLUSION_SPEC
-from continuum_gym.envs.tasks import (
-    VISIBILITY_FRACTION,
-    occlusion_task_count,
-    occlusion_tasks,
-)
-from continuum_gym.geometry.lens_cone import LensCone
+from continuum_gym.envs.tasks import VISIBILITY_FRACTION, TaskContext
 
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
 INFO_FIELDS = (
@@ -82,8 +76,10 @@ class OcclusionCore(BatchedCore):
 
     spec = OCCLUSION_SPEC
     config_class = OcclusionConfig
-    reward_names = REWARD_TERMS
+    builtin_reward_names = REWARD_TERMS
     info_fields = INFO_FIELDS
+    metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
+                      "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
 
     def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, **kwargs):
         self.config = config = self._config(config, kwargs)
@@ -97,19 +93,23 @@ class OcclusionCore(BatchedCore):
         self.limits = config.limits
         self.visibility_guard = config.visibility_guard
         self.max_episode_steps = config.max_episode_steps
-        self.cone = LensCone(lens_model=config.lens_model)
-        # The baseline always exists inside (for its rate limits and kernels); has_base says if it acts.
-        self.controller = make_controller(config.base_controller or "projected_gradient", cone=self.cone,
-                                          limits=self.limits)
-        self.robot = self.controller.robot
+        self.cone = config.cone
+        self.robot = config.robot
+        # The built-in baseline always exists inside (its rate limits, cone and kernels); has_base says if a base
+        # acts, and a registered controller's slot replaces its command when active.
+        builtin = config.base_controller if config.base_controller in self.spec.baselines else "projected_gradient"
+        self.controller = make_controller(builtin, robot=self.robot, cone=self.cone, limits=self.limits)
         self.dof = dof = self.robot.dof
         lower, upper, rate_limit = self.limits.bounds(self.robot.n_segments)
-        self.task_count = occlusion_task_count(self.task, self.task_split)
+        self.task_context = TaskContext(self.robot, self.control_dt, self.cone, self.limits)
+        self.task_source = config.task_source
+        self.task_count = self.task_source.count(self.task_split, self.task_context)
         self.rate_scale_vec = np.append(rate_limit, self.limits.gamma_rate)
         obs_dim = observation_dim(self.robot.n_segments)
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (dof + 1,), np.float32)
         n = self.num_envs
+        self._setup_rewards()
         self.q = np.zeros((n, dof))
         self.gamma = np.zeros(n)
         self.steps = np.zeros(n, dtype=np.int64)
@@ -117,18 +117,16 @@ class OcclusionCore(BatchedCore):
         self.base_cmd = np.zeros((n, dof + 1))
         self.base_info = np.zeros((n, 2), dtype=np.int64)
         self.metrics = np.zeros((n, N_METRICS))
-        self.terms = np.zeros((n, len(REWARD_TERMS)))
+        self.terms = np.zeros((n, len(self.reward_names)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.n_chunks = parallel_chunks(n)
-        self.tasks = occlusion_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt,
-                                     self.limits.max_bend, self.limits.insertion)
+        self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         guard = self.visibility_guard
         self._state = OcclusionState(self.q, self.gamma, self.steps)
-        self._tasks = TaskArrays(self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase,
-                                 self.tasks.R_des, self.tasks.duration, self.limit)
+        self._tasks = task_arrays(self.tasks, self.limit)
         self._env = OcclusionStepParams(
             control_dt=self.control_dt, substeps=self.substeps, has_base=has_base,
             nullspace=self.residual_space == "nullspace", residual_scale=self.residual_scale if has_base else 1.0,
@@ -138,13 +136,15 @@ class OcclusionCore(BatchedCore):
             visibility_guard=-1.0 if guard is None else float(guard))
         self._out = OcclusionOutputs(self.base_cmd, self.base_info, self.obs, self.metrics, self.terms, self.rewards,
                                      self.flags)
-        self._model = (self.robot.kernel_args(), self.controller.params)
+        self._model = self.kernel_model()
+
+    def kernel_model(self) -> tuple:
+        return self.robot.kernel_args(), self.controller.params
 
     # ------------------------------------------------------------------ state
     def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)
-        fresh = occlusion_tasks(self.task, self.task_split, task_ids, self.control_dt, self.limits.max_bend,
-                                self.limits.insertion)
+        fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)
         self.gamma[rows] = fresh.start_gamma
         self.observe_rows(rows)
@@ -152,11 +152,12 @@ class OcclusionCore(BatchedCore):
     def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
         occlusion_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
-                                self._out)
+                                self._custom, self._out)
 
     def step(self, actions: np.ndarray, active: np.ndarray):
-        run_in_chunks(occlusion_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env, self._out),
-                      self.num_envs, self.n_chunks)
+        run_in_chunks(occlusion_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env,
+                                             self._custom, self._reward_slot, self._out), self.num_envs, self.n_chunks)
+        self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
     def step_values(self) -> dict:
@@ -169,13 +170,10 @@ class OcclusionCore(BatchedCore):
 
     def controller_observation(self, row: int = 0) -> dict:
         """The dict observation an analytic controller's ``predict`` reads, for one row."""
-        t = np.array([self.steps[row] * self.control_dt])
-        p = np.empty((1, 1, 3))
-        v = np.empty((1, 1, 3))
-        trajectory_batch(self.tasks.centre[row:row + 1], self.tasks.amp[row:row + 1], self.tasks.omega[row:row + 1],
-                         self.tasks.phase[row:row + 1], t, p, v)
-        return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p[0, 0],
-                "R_des": self.tasks.R_des[row], "v_des": v[0, 0], "dt": self.control_dt / self.substeps}
+        t = self.steps[row] * self.control_dt
+        p, v = self.desired(row, t)
+        return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p, "R_des": self.desired_rotation(row, t),
+                "v_des": v, "dt": self.control_dt / self.substeps, "robot": self.robot, "cone": self.cone}
 
     # ------------------------------------------------------------------ rendering (pybullet, optional)
     def make_scene(self):

@@ -27,11 +27,12 @@ from continuum_gym.baselines.occlusion_kernels import (
     wrap_angle,
 )
 from continuum_gym.envs.common_kernels import (
-    TaskArrays,
     clamp,
     clip_observation,
-    trajectory_point,
+    desired_point,
+    desired_rotation,
 )
+from continuum_gym.envs.custom import add_reward_terms
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.linalg import damped_gram_solve
@@ -80,7 +81,8 @@ OcclusionOutputs = namedtuple("OcclusionOutputs", ["base_cmd", "base_info", "obs
                                                    "flags"])
 #: Per-thread scratch of ``occlusion_step_row``.
 OcclusionStepWork = namedtuple("OcclusionStepWork", ["ws", "scratch", "qdot", "residual", "projected", "cmd", "p_des",
-                                                     "v_des", "A", "B", "ones", "points", "lens", "dr"])
+                                                     "v_des", "A", "B", "ones", "points", "lens", "dr", "w", "w_rate",
+                                                     "turn", "R_goal", "full_cmd"])
 
 
 def observation_dim(n_segments: int) -> int:
@@ -95,7 +97,8 @@ def make_step_work(n_segments, n_points, n_insert):
     m = n_insert + n_segments * VOI_SAMPLES_PER_SEGMENT + 1
     return OcclusionStepWork(make_workspace(n_segments), make_scratch(n_points, dof), np.empty(dof), np.empty(dof),
                              np.empty(dof), np.empty(dof), np.empty(3), np.empty(3), np.empty((6, 6)),
-                             np.empty((6, 2)), np.ones(dof), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)))
+                             np.empty((6, 2)), np.ones(dof), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)),
+                             np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(dof + 1))
 
 
 @njit(cache=True)
@@ -145,7 +148,7 @@ def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
 
 
 @njit(cache=True)
-def occlusion_observe(i, state, tasks, robot, prm, env, work, out):
+def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     """Geometry at the state of row i: next baseline command (cached), observation and metrics.
 
     Observation layout for n segments (see the env docstring): bends (n), sin/cos delta (2n),
@@ -162,11 +165,19 @@ def occlusion_observe(i, state, tasks, robot, prm, env, work, out):
     scratch = work.scratch
     p_des = np.empty(3)
     v_des = np.empty(3)
-    trajectory_point(tasks.centre[i], tasks.amp[i], tasks.omega[i], tasks.phase[i], t, p_des, v_des)
+    desired_point(tasks, i, t, p_des, v_des)
+    R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
     qdot = np.empty(dof)
     base_cmd = out.base_cmd
-    if env.has_base:
-        gd, frozen, scale = occlusion_rates_kernel(q, gamma, p_des, tasks.R_des[i], v_des, sub_dt, robot, prm,
+    if env.has_base and custom.active:
+        custom.rates[0](q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, custom.params, work.full_cmd)
+        tip_kernel(q, robot, work.ws, scratch.p, scratch.R, scratch.J)
+        for k in range(dof + 1):
+            base_cmd[i, k] = work.full_cmd[k]
+        out.base_info[i, BASE_FROZEN] = 0
+        out.base_info[i, BASE_SATURATED] = 0
+    elif env.has_base:
+        gd, frozen, scale = occlusion_rates_kernel(q, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
                                                    work.ws, scratch, qdot)
         for k in range(dof):
             base_cmd[i, k] = qdot[k]
@@ -182,7 +193,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, work, out):
     p = scratch.p
     R = scratch.R
     e_w = np.empty(3)
-    orientation_error(tasks.R_des[i], R, np.empty((3, 3)), e_w)
+    orientation_error(R_des, R, np.empty((3, 3)), e_w)
     e_p0 = p_des[0] - p[0]
     e_p1 = p_des[1] - p[1]
     e_p2 = p_des[2] - p[2]
@@ -222,7 +233,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, work, out):
 
 
 @njit(cache=True)
-def occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work):
+def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
     ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
@@ -256,9 +267,19 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work):
             gd = base_cmd[i, dof]
             if env.has_base and env.nullspace:
                 tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
+        elif env.has_base and custom.active:
+            desired_point(tasks, i, t, p_des, v_des)
+            R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+            custom.rates[0](q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, custom.params, work.full_cmd)
+            for k in range(dof):
+                qdot[k] = work.full_cmd[k]
+            gd = work.full_cmd[dof]
+            if env.nullspace:
+                tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
         elif env.has_base:
-            trajectory_point(tasks.centre[i], tasks.amp[i], tasks.omega[i], tasks.phase[i], t, p_des, v_des)
-            gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, tasks.R_des[i], v_des, dt, robot, prm, ws,
+            desired_point(tasks, i, t, p_des, v_des)
+            R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+            gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, R_des, v_des, dt, robot, prm, ws,
                                                             scratch, qdot)
             base_frozen |= frozen
             if base_scale < 1.0:
@@ -300,7 +321,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work):
             gamma_saturated = 1
         G[i] = wrap_angle(G[i] + g_rate * dt)
     state.steps[i] += 1
-    occlusion_observe(i, state, tasks, robot, prm, env, work, out)
+    occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
@@ -311,10 +332,6 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work):
     terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR] / 0.01
     terms[i, 3] = -weights[3] * (over / (1.0 - env.visibility_fraction) if over > 0.0 else 0.0)
     terms[i, 4] = -weights[4] * action_sq / (dof + 1)
-    total = 0.0
-    for k in range(N_TERMS_REWARD):
-        total += terms[i, k]
-    out.rewards[i] = total
     flags = out.flags
     tip_error = metrics[i, METRIC_TIP_ERROR]
     flags[i, FLAG_CLAMPED] = clamped
@@ -325,10 +342,16 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work):
     flags[i, FLAG_BASE_FROZEN] = base_frozen
     flags[i, FLAG_BASE_SATURATED] = base_saturated
     flags[i, FLAG_GUARDED] = guarded
+    total = 0.0
+    for k in range(N_TERMS_REWARD):
+        total += terms[i, k]
+    if len(terms_slot.fns) > 0:  # registered compiled terms, after the built-in ones
+        total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_TERMS_REWARD)
+    out.rewards[i] = total
 
 
 @njit(cache=True, nogil=True)
-def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, out, start, stop):
+def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, start, stop):
     """Advance every active row in [start, stop) by one control step.
 
     Releases the GIL, so ``BatchedCore`` steps row chunks on several threads; rows are independent and
@@ -337,16 +360,16 @@ def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, out, st
     work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
     for i in range(start, stop):
         if active[i] != 0:
-            occlusion_step_row(i, state, actions, tasks, robot, prm, env, out, work)
+            occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work)
 
 
 @njit(cache=True)
-def occlusion_observe_batch(rows, state, tasks, robot, prm, env, out):
+def occlusion_observe_batch(rows, state, tasks, robot, prm, env, custom, out):
     """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
     work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
     for i in rows:
-        occlusion_observe(i, state, tasks, robot, prm, env, work, out)
+        occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
 
 
 __all__ = ["occlusion_step_batch", "occlusion_observe_batch", "REWARD_TERMS",
-           "observation_dim", "OcclusionState", "TaskArrays", "OcclusionStepParams", "OcclusionOutputs"]
+           "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]

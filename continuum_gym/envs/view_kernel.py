@@ -25,7 +25,8 @@ from continuum_gym.baselines.view_tracking import (
     view_errors,
     view_rates_kernel,
 )
-from continuum_gym.envs.common_kernels import clip_observation, trajectory_point
+from continuum_gym.envs.common_kernels import clip_observation, desired_point
+from continuum_gym.envs.custom import add_reward_terms
 from continuum_gym.geometry.overlap import overlap_ratio_nb
 from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
@@ -65,21 +66,26 @@ ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "d
 
 
 @njit(cache=True)
-def view_observe(i, state, tasks, robot, prm, dv, frustum, env, scratch, out):
+def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch, out):
     """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)]."""
     q = state.q[i]
     control_dt = env.control_dt
     t = state.steps[i] * control_dt
     q_dv = np.empty(4)
     dv_rate = np.empty(4)
-    trajectory_point(tasks.centre[i], tasks.amp[i], tasks.omega[i], tasks.phase[i], t, q_dv, dv_rate)
+    desired_point(tasks, i, t, q_dv, dv_rate)
     p_dv = np.empty(3)
     R_dv = np.empty((3, 3))
     p_tgt = np.empty(3)
     davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
     qdot = np.empty(6)
     base_cmd = out.base_cmd
-    if env.has_base:
+    if env.has_base and custom.active:
+        custom.rates[0](q, p_tgt, R_dv, control_dt, robot, custom.params, qdot)
+        eps_p, eps_r = view_errors(q, p_tgt, R_dv, robot, scratch)
+        for k in range(6):
+            base_cmd[i, k] = qdot[k]
+    elif env.has_base:
         eps_p, eps_r, _ = view_rates_kernel(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
         for k in range(6):
             base_cmd[i, k] = qdot[k]
@@ -126,7 +132,7 @@ def make_view_step_work():
 
 
 @njit(cache=True)
-def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, work, cmd):
+def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, work, cmd):
     """The baseline's joint rates towards the da Vinci target moved by the action (target-space residual).
 
     The target point moves by a[0:3] * residual_scale * target_scale[0] (m) and the target frame turns by
@@ -134,7 +140,7 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, work, cm
     """
     q_dv, p_dv, R_dv, p_tgt, w, turn, R_goal = work.q_dv, work.p_dv, work.R_dv, work.p_tgt, work.w, work.turn, \
         work.R_goal
-    trajectory_point(tasks.centre[i], tasks.amp[i], tasks.omega[i], tasks.phase[i], t, q_dv, work.dv_rate)
+    desired_point(tasks, i, t, q_dv, work.dv_rate)
     davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
     for a in range(3):
         p_tgt[a] += actions[i, a] * env.residual_scale * env.target_scale[0]
@@ -143,11 +149,14 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, work, cm
     for a in range(3):
         for b in range(3):
             R_goal[a, b] = turn[a, 0] * R_dv[0, b] + turn[a, 1] * R_dv[1, b] + turn[a, 2] * R_dv[2, b]
-    view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
+    if custom.active:
+        custom.rates[0](q, p_tgt, R_goal, env.control_dt, robot, custom.params, cmd)
+    else:
+        view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
 
 
 @njit(cache=True)
-def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, out, work):
+def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work):
     """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for row i."""
     cmd, q_new = work.cmd, work.q_new
     q = state.q[i]
@@ -157,7 +166,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, out, w
     for k in range(6):
         action_sq += actions[i, k] * actions[i, k]
     if env.target_space and action_sq > 0.0:
-        target_residual_rates(i, q, state.steps[i] * control_dt, actions, tasks, robot, prm, dv, env, work, cmd)
+        target_residual_rates(i, q, state.steps[i] * control_dt, actions, tasks, robot, prm, dv, env, custom, work, cmd)
     elif env.target_space:  # a zero target residual is the baseline's cached command, bit for bit
         for k in range(6):
             cmd[k] = base_cmd[i, k]
@@ -175,7 +184,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, out, w
     for k in range(6):
         q[k] = q_new[k]
     state.steps[i] += 1
-    view_observe(i, state, tasks, robot, prm, dv, frustum, env, work.scratch, out)
+    view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work.scratch, out)
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
@@ -184,28 +193,30 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, out, w
     terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR]
     terms[i, 3] = -weights[3] * action_sq / 6.0
     terms[i, 4] = weights[4] if metrics[i, METRIC_OR] > OVERLAP_BONUS_THRESHOLD else 0.0
-    total = 0.0
-    for k in range(N_REWARD_TERMS):
-        total += terms[i, k]
-    out.rewards[i] = total
     flags = out.flags
     flags[i, FLAG_CLAMPED] = clamped
     flags[i, FLAG_RATE_SATURATED] = 1 if scale < 1.0 else 0
     flags[i, FLAG_TERMINATED] = 0 if math.isfinite(metrics[i, METRIC_POSITION_ERROR]) else 1
     flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+    total = 0.0
+    for k in range(N_REWARD_TERMS):
+        total += terms[i, k]
+    if len(terms_slot.fns) > 0:  # registered compiled terms, after the built-in ones
+        total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_REWARD_TERMS)
+    out.rewards[i] = total
 
 
 @njit(cache=True, nogil=True)
-def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, out, start, stop):
+def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, start, stop):
     """Advance every active row in [start, stop) by one control step (releases the GIL: see occlusion_kernel)."""
     work = make_view_step_work()
     for i in range(start, stop):
         if active[i] != 0:
-            view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, out, work)
+            view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work)
 
 
 @njit(cache=True)
-def view_observe_batch(rows, state, tasks, robot, prm, dv, frustum, env, out):
+def view_observe_batch(rows, state, tasks, robot, prm, dv, frustum, env, custom, out):
     scratch = make_view_scratch()
     for i in rows:
-        view_observe(i, state, tasks, robot, prm, dv, frustum, env, scratch, out)
+        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch, out)

@@ -15,11 +15,11 @@ from continuum_gym.envs.batched import (
     parallel_chunks,
     run_in_chunks,
 )
-from continuum_gym.envs.common_kernels import TaskArrays, trajectory_batch
+from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import ViewTrackingConfig
 from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
 from continuum_gym.envs.spec import VIEW_SPEC
-from continuum_gym.envs.tasks import view_task_count, view_tasks
+from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.view_kernel import (
     ACTION_DIM,
     FLAG_CLAMPED,
@@ -44,7 +44,6 @@ from continuum_gym.envs.view_kernel import (
     view_step_batch,
 )
 from continuum_gym.geometry.frustum import Frustum
-from continuum_gym.robots import DaVinciEndoscope
 
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
 ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, math.pi])
@@ -71,8 +70,10 @@ class ViewTrackingCore(BatchedCore):
 
     spec = VIEW_SPEC
     config_class = ViewTrackingConfig
-    reward_names = REWARD_TERMS
+    builtin_reward_names = REWARD_TERMS
     info_fields = INFO_FIELDS
+    metric_columns = {"overlap_ratio": METRIC_OR, "position_error_m": METRIC_POSITION_ERROR,
+                      "orientation_error_rad": METRIC_ORIENTATION_ERROR}
     dof = ACTION_DIM
 
     def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, **kwargs):
@@ -86,56 +87,62 @@ class ViewTrackingCore(BatchedCore):
         self.control_dt = config.control_dt
         self.substeps = 1
         self.grid = config.grid
-        self.controller = make_controller(config.base_controller or "dimension_reduced")
+        builtin = config.base_controller if config.base_controller in self.spec.baselines else "dimension_reduced"
+        self.controller = make_controller(builtin, robot=config.robot)
         self.robot = self.controller.robot
-        self.davinci = DaVinciEndoscope()
+        self.davinci = config.davinci
         self.frustum = Frustum()
         self.rate_limits = np.full(ACTION_DIM, np.inf) if config.rate_limits is None else \
             np.array(config.rate_limits, dtype=float)
         self.max_episode_steps = config.max_episode_steps
-        self.task_count = view_task_count(self.task, self.grid)
+        self.task_context = TaskContext(self.robot, self.control_dt, grid=self.grid)
+        self.task_source = config.task_source
+        self.task_count = self.task_source.count(self.task_split, self.task_context)
         self.observe_target = config.observe_target
         obs_dim = OBS_DIM + (TARGET_OBS_DIM if self.observe_target else 0)
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         n = self.num_envs
+        self._setup_rewards()
         self.q = np.zeros((n, 6))
         self.steps = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, obs_dim))
         self.base_cmd = np.zeros((n, ACTION_DIM))
         self.metrics = np.zeros((n, N_METRICS))
-        self.terms = np.zeros((n, len(REWARD_TERMS)))
+        self.terms = np.zeros((n, len(self.reward_names)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.n_chunks = parallel_chunks(n)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
-        self.tasks = view_tasks(self.task, self.task_split, np.zeros(n, dtype=np.int64), self.control_dt, self.grid)
+        self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         self._state = ViewState(self.q, self.steps)
-        self._tasks = TaskArrays(self.tasks.centre, self.tasks.amp, self.tasks.omega, self.tasks.phase,
-                                 self.tasks.R_des, self.tasks.duration, self.limit)
+        self._tasks = task_arrays(self.tasks, self.limit)
         self._env = ViewStepParams(
             control_dt=self.control_dt, has_base=has_base, residual_scale=self.residual_scale if has_base else 1.0,
             target_space=self.residual_space == "target", target_scale=TARGET_SHIFT_SCALE, action_scale=ACTION_SCALE,
             rate_limit=self.rate_limits, weights=np.array([self.weights[key] for key in REWARD_TERMS]))
         self._out = ViewOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
-        self._model = (self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(),
-                       self.frustum.kernel_args())
+        self._model = self.kernel_model()
+
+    def kernel_model(self) -> tuple:
+        return self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(), self.frustum.kernel_args()
 
     def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)
-        fresh = view_tasks(self.task, self.task_split, task_ids, self.control_dt, self.grid)
+        fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)
         self.observe_rows(rows)
 
     def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
         view_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
-                           self._out)
+                           self._custom, self._out)
 
     def step(self, actions: np.ndarray, active: np.ndarray):
-        run_in_chunks(view_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env, self._out),
-                      self.num_envs, self.n_chunks)
+        run_in_chunks(view_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env,
+                                        self._custom, self._reward_slot, self._out), self.num_envs, self.n_chunks)
+        self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
     def step_values(self) -> dict:
@@ -146,17 +153,13 @@ class ViewTrackingCore(BatchedCore):
 
     def davinci_configuration(self, row: int = 0) -> np.ndarray:
         """q_davinci [L_dV (m), yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
-        t = np.array([self.steps[row] * self.control_dt])
-        x = np.empty((1, 1, 4))
-        v = np.empty((1, 1, 4))
-        trajectory_batch(self.tasks.centre[row:row + 1], self.tasks.amp[row:row + 1], self.tasks.omega[row:row + 1],
-                         self.tasks.phase[row:row + 1], t, x, v)
+        x, _ = self.desired(row, self.steps[row] * self.control_dt)
         lower, upper = self.davinci.joint_limits
-        return np.clip(x[0, 0], lower, upper)
+        return np.clip(x, lower, upper)
 
     def controller_observation(self, row: int = 0) -> dict:
         p, R = self.davinci.target_pose(self.davinci_configuration(row))
-        return {"q": self.q[row].copy(), "p_target": p, "R_target": R, "dt": self.control_dt}
+        return {"q": self.q[row].copy(), "p_target": p, "R_target": R, "dt": self.control_dt, "robot": self.robot}
 
     def make_scene(self):
         from continuum_gym.render import ViewTrackingScene

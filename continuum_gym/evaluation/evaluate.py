@@ -71,9 +71,9 @@ def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
     (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
     """
     source = config.get("env_config") or config.get("env_kwargs") or {}
-    if config.get("env_config"):
-        source = spec.config_class.from_dict(source).as_kwargs()
-    return {key: value for key, value in source.items() if key in spec.policy_keys}
+    picked = {key: value for key, value in source.items() if key in spec.policy_keys}
+    spec.config_class.from_kwargs(**picked)  # the same checks as the env's: a broken config fails here, named
+    return picked
 
 
 def method_runs(env_id: str, policies: dict) -> list:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from continuum_gym.geometry.lens_cone import resolve_cone
+from continuum_gym.validation import as_finite, integer
 
 __all__ = ["pixel_occlusion", "clear_scene_cache"]
 
@@ -58,18 +59,15 @@ def pixel_occlusion(robot, q, gamma, cone=None, resolution=128, scene=None):
     if not isinstance(robot, MultiBackboneRobot):
         raise ValueError(f"robot must be a MultiBackboneRobot; got {type(robot).__name__}")
     cone = resolve_cone(cone)
-    if int(resolution) != resolution or not 4 <= resolution <= 4096:
-        raise ValueError(f"resolution must be an integer in [4, 4096]; got {resolution!r}")
-    q = np.asarray(q, dtype=np.float64)
-    if q.ndim < 1 or q.shape[-1] != 7:
-        raise ValueError(f"q must have shape (..., 7); got {q.shape}")
-    gamma = np.asarray(gamma, dtype=np.float64)
+    resolution = integer(resolution, "resolution (pixels)", low=4, high=4096)
+    q = as_finite(q, (robot.dof,), "q")
+    gamma = as_finite(gamma, (), "gamma")
     shape = np.broadcast_shapes(q.shape[:-1], gamma.shape)
     if scene is None:
         scene = _cached_scene(robot, cone)
     elif scene.robot != robot or scene.cone != cone:
         raise ValueError("scene was built for another robot or cone")
-    Q = np.broadcast_to(q, shape + (7,)).reshape(-1, 7)
+    Q = np.broadcast_to(q, shape + (robot.dof,)).reshape(-1, robot.dof)
     G = np.broadcast_to(gamma, shape).reshape(-1)
     out = np.empty(len(Q))
     for i in range(len(Q)):

@@ -33,7 +33,7 @@ from continuum_gym.render.scene import (
 class OcclusionScene(Scene):
     """The MBCR beside the rotating angled-lens endoscope (paper 000), rendered headless.
 
-    Bodies: the robot (inserted part, ``3 n_per_segment`` links, 4 disks at the segment ends; group
+    Bodies: the robot (inserted part, ``n_segments n_per_segment`` links, a disk at each segment end; group
     ``"robot"``), the endoscope shaft along -z_w from the lens with a lens window (``"shaft"``), the view
     cone as a wireframe to the working distance (``"cone"``, external view only) and a textured tissue
     surface (``"tissue"``: the disk the circular field of view sees, and ``"tissue_frame"``: the rest of
@@ -112,7 +112,7 @@ class OcclusionScene(Scene):
             raise
         self.q = None
         self.gamma = None
-        self.update(self.robot.psi_a, 0.0)
+        self.update(self.robot.home, 0.0)
 
     # ------------------------------------------------------------------ build
     def _build(self, shaft_radius, tissue_half_size):
@@ -123,16 +123,17 @@ class OcclusionScene(Scene):
                                                      top="flat"),
                                       COLORS["straight"])
         self._links = []
+        last = self.robot.n_segments - 1
         for s, length in enumerate(self.robot.lengths):
-            color = COLORS["segments"][s]
-            if s < 2:
+            color = COLORS["segments"][s % len(COLORS["segments"])]
+            if s < last:
                 self._links += self._bodies("robot", link(r, length / n), color, count=n)
             else:
                 if n > 1:
                     self._links += self._bodies("robot", link(r, length / n), color, count=n - 1)
                 self._links += self._bodies("robot", link(r, length / n, top="flat"), color)
         self._disks = self._bodies("robot", tube(1.12 * r, -0.0004, 0.0004, sides=10, bottom="flat", top="flat"),
-                                   COLORS["disk"], count=4)
+                                   COLORS["disk"], count=self.robot.n_segments + 1)
         self._shaft = self._bodies("shaft", tube(shaft_radius, -0.1, -2e-4, sides=16, bottom="open", top="flat"),
                                    COLORS["shaft"])
         self._lens = self._bodies("shaft", tube(0.7 * shaft_radius, -4e-4, -2e-4, sides=16, bottom="flat",
@@ -161,18 +162,19 @@ class OcclusionScene(Scene):
         self._ids = self._straight + self._links + self._disks + self._shaft + self._lens + self._cone
         half = np.repeat(0.5 * np.asarray(self.robot.lengths) / n, n)
         self._half_links = half[:, None]
-        self._spheres = (self._links + self._disks, np.zeros((3 * n + 4, 3)),
-                         np.concatenate([half + r, np.full(4, 1.12 * r + 4e-4)]))
+        disks = self.robot.n_segments + 1
+        self._spheres = (self._links + self._disks, np.zeros((self.robot.n_segments * n + disks, 3)),
+                         np.concatenate([half + r, np.full(disks, 1.12 * r + 4e-4)]))
         if self.tissue_mode == "view":
             self._ids += self._tissue_bodies
 
     # ------------------------------------------------------------------ state
     def update(self, q, gamma) -> None:
-        """Move every body to configuration ``q`` (7,) and endoscope rotation ``gamma`` (rad)."""
+        """Move every body to configuration ``q`` (dof,) and endoscope rotation ``gamma`` (rad)."""
         self._check_open()
         q = np.asarray(q, dtype=np.float64)
-        if q.shape != (7,):
-            raise ValueError(f"q must have shape (7,); got {q.shape}")
+        if q.shape != (self.robot.dof,):
+            raise ValueError(f"q must have shape ({self.robot.dof},); got {q.shape}")
         gamma = float(gamma)
         if not math.isfinite(gamma):
             raise ValueError(f"gamma must be finite (rad); got {gamma!r}")
@@ -180,17 +182,18 @@ class OcclusionScene(Scene):
         P = self.robot.backbone(q, n)  # raises on non-finite q
         _, R_tip = self.robot.forward_kinematics(q)
         chords = P[ni + 1:] - P[ni:-1]
-        ends = ni + n * np.arange(4)
-        tangents = np.empty((4, 3))
+        segments = self.robot.n_segments
+        ends = ni + n * np.arange(segments + 1)
+        tangents = np.empty((segments + 1, 3))
         tangents[0] = E3
-        tangents[1:3] = P[ends[1:3] + 1] - P[ends[1:3] - 1]
-        tangents[3] = R_tip[:, 2]
+        tangents[1:segments] = P[ends[1:segments] + 1] - P[ends[1:segments] - 1]
+        tangents[segments] = R_tip[:, 2]
         directions = np.concatenate([chords, tangents])
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
         link_quats = quat_z_to(directions).tolist()
         centres = self._spheres[1]
-        centres[:3 * n] = P[ni:-1] + self._half_links * directions[:3 * n]
-        centres[3 * n:] = P[ends]
+        centres[:segments * n] = P[ni:-1] + self._half_links * directions[:segments * n]
+        centres[segments * n:] = P[ends]
         p_lens = lens_origin(gamma, self.cone)
         R_lens = lens_rotation(gamma, self.cone)
         q_lens = quaternion(R_lens)

@@ -134,6 +134,10 @@ class DaVinciEndoscope:
         """(signed alpha (rad), Le (m), lower (4,), upper (4,)): the bundle ``davinci_pose`` reads."""
         return self._args
 
+    def __reduce__(self):
+        # rebuilt through __init__, so that the kernel arrays are read-only again (the compiled kernels' types)
+        return (type(self), (self._alpha, self._Le, self._convention))
+
     def to_dict(self) -> dict:
         """The constructor arguments as plain YAML/JSON values (rad, m)."""
         return {"alpha": self._alpha, "Le": self._Le, "alpha_convention": self._convention}

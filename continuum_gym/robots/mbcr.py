@@ -507,6 +507,11 @@ class MultiBackboneRobot:
         q = as_configuration(q, self.dof)
         return HALF_PI - q[..., 0:-1:2]
 
+    def __reduce__(self):
+        # rebuilt through __init__, so that the kernel arrays are read-only again (the compiled kernels' types)
+        return (type(self), (self.lengths, self.youngs_modulus, self.primary_diameter, self.secondary_diameter,
+                             self.n_secondary, self.n_insert_samples, self.backbone_stiffness))
+
     def to_dict(self) -> dict:
         """The constructor arguments as plain YAML/JSON values."""
         out = {"lengths": list(self.lengths), "youngs_modulus": self.youngs_modulus,

@@ -18,7 +18,12 @@ import torch
 import yaml
 
 from continuum_gym.agents import checkpoint
-from continuum_gym.agents.checkpoint import find_resumable, list_units, verify, write_unit
+from continuum_gym.agents.checkpoint import (
+    find_resumable,
+    list_units,
+    verify,
+    write_unit,
+)
 from continuum_gym.agents.residual import actor_parameters
 from continuum_gym.agents.train import train
 from continuum_gym.cli import main

@@ -14,7 +14,6 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import continuum_gym
 from continuum_gym.baselines import DimensionReduced, ProjectedGradient
-from continuum_gym.envs.common_kernels import trajectory_batch
 from continuum_gym.envs.occlusion import (
     OcclusionAvoidanceEnv,
     OcclusionAvoidanceVectorEnv,
@@ -141,12 +140,10 @@ def test_zero_residual_reproduces_the_projected_gradient_exactly(task):
         gammas.append(float(core.gamma[0]))
     sub_dt = core.control_dt / core.substeps
     times = np.array([k * core.control_dt + s * sub_dt for k in range(steps) for s in range(core.substeps)])
-    p = np.empty((1, len(times), 3))
-    v = np.empty((1, len(times), 3))
-    tasks = core.tasks
-    trajectory_batch(tasks.centre[:1], tasks.amp[:1], tasks.omega[:1], tasks.phase[:1], times, p, v)
-    R = np.broadcast_to(tasks.R_des[0], (len(times), 3, 3))
-    q_ref, g_ref = ProjectedGradient(limits=core.limits, cone=core.cone).rollout(q0, gamma0, p[0], R, v[0], dt=sub_dt)
+    desired = [core.desired(0, t) for t in times]
+    p, v = np.array([d[0] for d in desired]), np.array([d[1] for d in desired])
+    R = np.broadcast_to(core.tasks.R_des[0], (len(times), 3, 3))
+    q_ref, g_ref = ProjectedGradient(limits=core.limits, cone=core.cone).rollout(q0, gamma0, p, R, v, dt=sub_dt)
     assert np.array_equal(np.array(qs), q_ref[::core.substeps])
     assert np.array_equal(np.array(gammas), g_ref[::core.substeps])
 
@@ -346,11 +343,11 @@ def test_guard_gamma_rate_keeps_the_largest_feasible_share_of_the_residual():
 
 
 # ---------------------------------------------------------------- splits
-def test_train_and_test_tasks_are_disjoint():
-    train = hold_start_pool("train", math.pi / 2, (0.0, 0.04))
-    test = hold_start_pool("test", math.pi / 2, (0.0, 0.04))
-    distances = np.linalg.norm(train[:, None] - test[None], axis=-1)
-    assert distances.min() > 1e-6
+def test_train_validation_and_test_tasks_are_disjoint():
+    pools = {split: hold_start_pool(split, math.pi / 2, (0.0, 0.04)) for split in ("train", "validation", "test")}
+    for a, b in (("train", "test"), ("train", "validation"), ("validation", "test")):
+        distances = np.linalg.norm(pools[a][:, None] - pools[b][None], axis=-1)
+        assert distances.min() > 1e-6, (a, b)
     a = ViewTrackingEnv(task="static", task_split="train")
     b = ViewTrackingEnv(task="static", task_split="test")
     a.reset(options={"task_id": 7})
@@ -362,7 +359,7 @@ def test_train_and_test_tasks_are_disjoint():
 @pytest.mark.parametrize("env_id, kwargs, name", [
     (OCCLUSION, {"task": "orbit"}, "task"),
     (OCCLUSION, {"task": "circle", "task_split": "train"}, "circle"),
-    (OCCLUSION, {"task_split": "validation"}, "task_split"),
+    (OCCLUSION, {"task_split": "dev"}, "task_split"),
     (OCCLUSION, {"base_controller": "dimension_reduced"}, "base_controller"),
     (OCCLUSION, {"lens_model": "fisheye"}, "lens_model"),
     (OCCLUSION, {"reward_weights": {"voi": -1.0}}, "reward_weights"),

@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from continuum_gym.robots.segment import SERIES_SWITCH, endoscope_segment_jacobian, endoscope_segment_pose, \
-    segment_tip_pose
+from continuum_gym.robots.segment import (
+    SERIES_SWITCH,
+    endoscope_segment_jacobian,
+    endoscope_segment_pose,
+    segment_tip_pose,
+)
 
 BENDS = np.concatenate([-np.logspace(-9, 0.4, 60), [0.0], np.logspace(-9, 0.4, 60),
                         SERIES_SWITCH * np.array([0.999, 1.0, 1.001, 1.5, 3.0])])

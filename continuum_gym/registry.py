@@ -1,0 +1,205 @@
+"""Plug-ins for researchers: their robots, task families, controllers and reward terms, by name.
+
+    from continuum_gym.registry import register_robot, register_task, register_controller, register_reward_term
+
+- ``register_robot(name, robot)``: a ``MultiBackboneRobot`` (1-4 segments) for OcclusionAvoidance or a
+  ``ContinuumEndoscope`` for ViewTracking, then ``gym.make(id, robot=name)``.
+- ``register_task(name, sampler, env=...)``: a family of tasks drawn per task id and split:
+  ``sampler(task_id, split, rng) -> TipTrajectory | DaVinciTrajectory``; then ``gym.make(id, task=name)``.
+- ``register_controller(name, rates, env=..., params=())``: a compiled rate function (the signatures
+  below) that runs as the residual base inside the compiled step; then ``base_controller=name``.
+- ``register_reward_term(name, fn, env=..., weight=1.0)``: a compiled per-row term or a batched numpy
+  function of the per-step metrics; it is added to the reward (and to ``info["reward_terms"]``) of every
+  env of that id made afterwards, with ``reward_weights={name: w}`` to change or zero its weight.
+
+Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):
+
+- OcclusionAvoidance controller: ``rates(q (dof,), gamma, p_des (3,), R_des (3, 3), v_des (3,), dt, robot,
+  cone, params (m,), out (dof + 1,)) -> None`` writes the joint rates (rad/s; m/s for q_ins) and the
+  endoscope rate (rad/s) into ``out``; ``robot`` is ``MultiBackboneRobot.kernel_args()``, ``cone`` is
+  ``LensCone.kernel_args()``, ``dt`` the substep (s).
+- ViewTracking controller: ``rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,), out (6,))
+  -> None``; ``robot`` is ``ContinuumEndoscope.kernel_args()``.
+- Reward term (compiled): ``term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), params (m,))
+  -> float64``, with the env's metric and flag columns (``METRIC_*``, ``FLAG_*`` of its kernel module).
+- Reward term (numpy, ``compiled=False``): ``fn(metrics: dict[str, (N,) array], actions (N, k)) -> (N,)``,
+  metrics named as in ``info``; applied once per batch step.
+
+Every entry point checks its input and raises ``ValueError`` naming the parameter and the valid range.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from continuum_gym.validation import closest, describe, number
+
+OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
+VIEW = "ContinuumGym/ViewTracking-v0"
+_NAME_HINT = "a non-empty string of letters, digits, '_' or '-'"
+
+
+@dataclass(frozen=True)
+class CustomController:
+    """A registered controller: its compiled rate function, parameters and an SB3-style ``predict``."""
+
+    name: str
+    env_id: str
+    rates: Any
+    params: np.ndarray
+    doc: str = ""
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=False):
+        """SB3 ``predict`` on a controller observation dict (``core.controller_observation(row)``)."""
+        from continuum_gym.envs.custom import controller_predict
+
+        return controller_predict(self, observation), state
+
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """A registered reward term: compiled (per row, inside the step) or batched numpy (after it)."""
+
+    name: str
+    env_id: str
+    fn: Any
+    weight: float
+    compiled: bool
+    params: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+ROBOTS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
+TASKS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
+CONTROLLERS: dict[str, dict[str, CustomController]] = {OCCLUSION: {}, VIEW: {}}
+REWARD_TERMS: dict[str, dict[str, RewardTerm]] = {OCCLUSION: {}, VIEW: {}}
+
+
+def _env(env: str) -> str:
+    from continuum_gym.envs.spec import get_spec
+
+    return get_spec(env).env_id
+
+
+def _name(name: Any, taken: Sequence[str], what: str, replace: bool) -> str:
+    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "_-" for c in name):
+        raise ValueError(f"name must be {_NAME_HINT}; got {describe(name)}")
+    if name in taken and not replace:
+        raise ValueError(f"name {name!r} is already a {what}; pick another name or pass replace=True")
+    return name
+
+
+def register_robot(name: str, robot, *, replace: bool = False) -> None:
+    """Make ``robot`` available as ``gym.make(id, robot=name)``.
+
+    A ``MultiBackboneRobot`` serves OcclusionAvoidance, a ``ContinuumEndoscope`` ViewTracking.
+    """
+    from continuum_gym.robots import ContinuumEndoscope, MultiBackboneRobot
+
+    if isinstance(robot, MultiBackboneRobot):
+        env = OCCLUSION
+    elif isinstance(robot, ContinuumEndoscope):
+        env = VIEW
+    else:
+        raise ValueError(f"robot must be a MultiBackboneRobot or a ContinuumEndoscope; got {describe(robot)}")
+    ROBOTS[env][_name(name, ROBOTS[env], "registered robot", replace)] = robot
+
+
+def robot_names(env_id: str) -> tuple:
+    return tuple(ROBOTS.get(env_id, {}))
+
+
+def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: int | None = None,
+                  replace: bool = False) -> None:
+    """A family of tasks, one instance per task id and split: ``sampler(task_id, split, rng)``.
+
+    Args:
+        name: the task's name, passed as ``gym.make(env, task=name)``.
+        sampler: returns a ``TipTrajectory`` (OcclusionAvoidance) or a ``DaVinciTrajectory`` (ViewTracking);
+            ``rng`` is a ``numpy.random.Generator`` seeded from (name, split, task_id), so draws repeat.
+        env: the environment id the family belongs to.
+        count: number of distinct instances (None: unbounded).
+    """
+    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.envs.tasks import SampledTasks
+    from continuum_gym.envs.trajectories import DaVinciTrajectory, TipTrajectory
+
+    env = _env(env)
+    if name in get_spec(env).config_class.builtin_tasks:
+        raise ValueError(f"name {name!r} is a built-in task of {env}; pick another name")
+    if not callable(sampler):
+        raise ValueError(f"sampler must be callable as sampler(task_id, split, rng); got {describe(sampler)}")
+    if count is not None:
+        count = int(number(count, "count (task instances)", low=1))
+    kind = TipTrajectory if env == OCCLUSION else DaVinciTrajectory
+    source = SampledTasks(_name(name, TASKS[env], "registered task", replace), sampler, kind, count)
+    source.draw("train", 0)  # fails now, naming the problem, rather than at the first reset
+    TASKS[env][name] = source
+
+
+def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Sequence[float] = (), doc: str = "",
+                        replace: bool = False) -> CustomController:
+    """A compiled rate function as the residual base: ``gym.make(env, base_controller=name)``.
+
+    The function is compiled for the documented signature here (``ValueError`` if it does not fit) and
+    called once on a test state, which must give a finite command.
+    """
+    from continuum_gym.envs.custom import check_controller
+    from continuum_gym.envs.spec import get_spec
+
+    env = _env(env)
+    if name in get_spec(env).baselines:
+        raise ValueError(f"name {name!r} is a built-in baseline of {env}; pick another name")
+    name = _name(name, CONTROLLERS[env], "registered controller", replace)
+    params = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
+    if not np.all(np.isfinite(params)):
+        raise ValueError(f"params must be finite numbers; got {describe(params)}")
+    controller = CustomController(name, env, rates, params, doc)
+    check_controller(controller)
+    CONTROLLERS[env][name] = controller
+    return controller
+
+
+def controller_names(env_id: str) -> tuple:
+    return tuple(CONTROLLERS.get(env_id, {}))
+
+
+def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float = 1.0, compiled: bool = True,
+                         params: Sequence[float] = (), replace: bool = False) -> RewardTerm:
+    """A named reward term, added (times ``weight``) to the reward of every env of ``env`` made afterwards.
+
+    ``compiled=True``: ``fn`` is a numba function of the compiled signature (runs per row inside the step);
+    ``compiled=False``: a batched numpy function of the per-step metrics (once per batch step).
+    """
+    from continuum_gym.envs.custom import check_reward_term
+    from continuum_gym.envs.spec import get_spec
+
+    env = _env(env)
+    builtin = get_spec(env).config_class.default_weights
+    if name in builtin:
+        raise ValueError(f"name {name!r} is a built-in reward term of {env}; pick another name")
+    name = _name(name, REWARD_TERMS[env], "registered reward term", replace)
+    weight = number(weight, "weight", low=0.0, high=1e6)
+    params = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
+    term = RewardTerm(name, env, fn, weight, bool(compiled), params)
+    check_reward_term(term)
+    REWARD_TERMS[env][name] = term
+    return term
+
+
+def unregister(name: str, env: str = OCCLUSION) -> None:
+    """Remove a registered robot, task, controller or reward term of ``env`` by name."""
+    env = _env(env)
+    for table in (ROBOTS, TASKS, CONTROLLERS, REWARD_TERMS):
+        if name in table[env]:
+            del table[env][name]
+            return
+    known = [*ROBOTS[env], *TASKS[env], *CONTROLLERS[env], *REWARD_TERMS[env]]
+    raise ValueError(f"nothing named {name!r} is registered for {env}{closest(name, known)}; registered: {known}")
+
+
+__all__ = ["register_robot", "register_task", "register_controller", "register_reward_term", "unregister",
+           "CustomController", "RewardTerm", "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS"]
