@@ -8,6 +8,8 @@ with one seed still gets an interval that reflects the spread over episodes.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 DEFAULT_REPS = 2000
@@ -30,9 +32,20 @@ def summarize(scores, reps: int = DEFAULT_REPS, seed: int = 0) -> dict:
     if scores.size == 1:
         low = high = point
     else:
-        estimates, intervals = library.get_interval_estimates(
-            {"m": scores}, _aggregates, reps=reps, task_bootstrap=True,
-            random_state=np.random.RandomState(seed))
+        # rliable 1.2 draws its resampling indices from numpy's *global* generator (update_indices calls
+        # np.random.choice) and ignores random_state, so a CI depended on whatever ran before. Seed the
+        # global generator for the draw and give the caller's state back afterwards.
+        caller_state = np.random.get_state()
+        np.random.seed(seed)
+        try:
+            with warnings.catch_warnings():
+                # arch deprecates the RandomState rliable hands it; the draws come from the seeded global state.
+                warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
+                estimates, intervals = library.get_interval_estimates(
+                    {"m": scores}, _aggregates, reps=reps, task_bootstrap=True,
+                    random_state=np.random.RandomState(seed))
+        finally:
+            np.random.set_state(caller_state)
         low, high = intervals["m"][0], intervals["m"][1]
     return {"mean": float(point[0]), "iqm": float(point[1]), "ci_low": float(low[0]), "ci_high": float(high[0]),
             "iqm_ci_low": float(low[1]), "iqm_ci_high": float(high[1]),
