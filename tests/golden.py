@@ -164,7 +164,9 @@ def run_evaluate(extra=()) -> dict:
         path = Path(tmp) / "evaluate.json"
         if main(["evaluate", "--out", tmp, "--json", str(path), "--no-progress", *extra]) != 0:
             raise RuntimeError("continuum-gym evaluate failed")
-        return json.loads(path.read_text())
+        result = json.loads(path.read_text())
+    result.pop("metadata", None)  # revision, versions and timings: not results
+    return result
 
 
 def differences(expected, actual, path="") -> list:

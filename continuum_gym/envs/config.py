@@ -204,6 +204,7 @@ class OcclusionConfig(EnvConfig):
                                        "action": 0.01}
     residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
     builtin_tasks: ClassVar[tuple] = OCCLUSION_TASKS
+    test_only_tasks: ClassVar[tuple] = OCCLUSION_TEST_ONLY
 
     task: Any = field(default="hold", metadata=spec(
         doc="`hold` (hold a paper-like start pose), `random` (smooth random tip trajectories, <= 12 mm), `mixed` "
@@ -302,6 +303,7 @@ class ViewTrackingConfig(EnvConfig):
                                        "overlap_bonus": 0.0}
     residual_spaces: ClassVar[tuple] = ("joint", "target")
     builtin_tasks: ClassVar[tuple] = VIEW_TASKS
+    test_only_tasks: ClassVar[tuple] = VIEW_TEST_ONLY
 
     task: Any = field(default="random", metadata=spec(
         doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "

@@ -14,7 +14,9 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,25 +31,34 @@ from continuum_gym.envs.spec import (
 OCCLUSION = OCCLUSION_SPEC.env_id
 VIEW = VIEW_SPEC.env_id
 POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
-OPTIMUM_CACHE = Path(__file__).resolve().parent / "data" / "optimum_cache.json"
 #: headroom_closed, computed for learned methods, is better when higher.
 HEADROOM = "headroom_closed"
 
 
 # ---------------------------------------------------------------------- methods
+@dataclass
+class MethodRun:
+    """One run (training seed) of a method: its policy (None: the analytic baseline) and its env keywords."""
+
+    policy: Any
+    env_kwargs: dict
+
+
 def discover_policies(directory) -> dict:
     """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``."""
     import yaml
 
     found: dict = {}
     directory = Path(directory)
-    if not directory.exists():
+    if not directory.is_dir():
         raise FileNotFoundError(f"--policies: no directory {directory}")
     for config_path in sorted(directory.rglob("config.yml")):
         run = config_path.parent
         if not (run / "model.zip").exists():
             raise FileNotFoundError(f"policy {run} has config.yml but no model.zip")
         config = yaml.safe_load(config_path.read_text())
+        if not isinstance(config, dict) or "env_id" not in config:
+            raise FileNotFoundError(f"policy {run}: config.yml has no env_id")
         base = config.get("base_controller")
         method = f"residual_{base}" if base else "pure_rl"
         found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
@@ -60,8 +71,10 @@ def load_policy(run: Path):
     from stable_baselines3 import PPO, SAC, TD3
 
     config = yaml.safe_load((run / "config.yml").read_text())
-    cls = {"ppo": PPO, "sac": SAC, "td3": TD3}[config["algo"]]
-    return cls.load(run / "model.zip", device="cpu"), config
+    algorithms = {"ppo": PPO, "sac": SAC, "td3": TD3}
+    if config.get("algo") not in algorithms:
+        raise ValueError(f"policy {run}: algo must be one of {sorted(algorithms)}, got {config.get('algo')!r}")
+    return algorithms[config["algo"]].load(run / "model.zip", device="cpu"), config
 
 
 def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
@@ -76,54 +89,109 @@ def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
     return picked
 
 
-def method_runs(env_id: str, policies: dict) -> list:
-    """[(method, [(policy, env_kwargs)])]: baselines first, then learned methods (one entry per seed)."""
-    spec = get_spec(env_id)
+def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict, dict]:
+    """(environment, policy, ignored) keywords of ``env_kwargs``.
+
+    The environment part (robot, cone, limits, timing, rewards) is the env every method runs in; the
+    policy part (``spec.policy_keys``: base controller, residual scale and space, ...) only the evaluated
+    policy's; task, split and grid are set by the protocol and recorded as ignored.
+    """
+    from continuum_gym.evaluation.benchmark import PROTOCOL_KEYS
+
+    env_kwargs = dict(env_kwargs or {})
+    spec.config_class.from_kwargs(**env_kwargs)  # named errors before anything runs
+    ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
+    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in spec.policy_keys}
+    return env_kwargs, policy, ignored
+
+
+def baseline_methods(spec: EnvSpec) -> list:
+    """[(baseline, [MethodRun])] in table order: the residual env with a zero residual is the baseline."""
+    return [(base, [MethodRun(None, {"base_controller": base})]) for base in spec.baselines]
+
+
+def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict) -> list:
+    """[(method, [MethodRun])] of the SB3 runs found by :func:`discover_policies` for ``spec``'s env.
+
+    A run that cannot be loaded is reported on stderr and in ``skipped`` ({run: reason}), not fatal.
+    """
     out = []
-    for base in spec.baselines:
-        out.append((base, [(None, {"base_controller": base})]))
-    for method, runs in sorted(policies.get(env_id, {}).items()):
+    for method, runs in sorted(policies.get(spec.env_id, {}).items()):
         entries = []
         for run in runs:
-            model, config = load_policy(run)
-            entries.append((model, policy_env_kwargs(spec, config)))
-        out.append((method, entries))
+            try:
+                model, config = load_policy(run)
+                entries.append(MethodRun(model, policy_env_kwargs(spec, config)))
+            except Exception as error:  # noqa: BLE001 - any broken run is reported and skipped, the rest runs
+                skipped[str(run)] = f"{type(error).__name__}: {error}"
+                print(f"continuum-gym evaluate: skipping {run}: {error}", file=sys.stderr)
+        if entries:
+            out.append((method, entries))
     return out
 
 
 # ---------------------------------------------------------------------- evaluation
-def evaluate_env(env_id: str, policies: dict, episodes: int, grid: int, progress: bool = True) -> dict:
-    """Per method: per task set, scores (seeds x episodes) of each metric, plus traces for figures."""
+def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress: bool = True,
+                 env_kwargs: dict | None = None, split: str = "test", skipped: dict | None = None) -> dict:
+    """Per method: per task set, scores (runs x episodes) of each metric, plus traces for figures.
+
+    ``methods`` is [(name, [MethodRun])]; every run acts in the env built from ``env_kwargs`` (the
+    protocol env: robot, limits, ...) plus its own policy keywords, on the protocol's task sets of ``split``.
+    A run whose observations do not fit, or whose policy fails, is reported and recorded in ``skipped``.
+    """
     from tqdm.auto import tqdm
 
+    from continuum_gym.evaluation.benchmark import episode_count, task_sets
+    from continuum_gym.evaluation.policies import PolicyError, as_predictor
     from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
 
     spec = get_spec(env_id)
+    skipped = {} if skipped is None else skipped
     results: dict = {}
-    work = []
-    for method, entries in method_runs(env_id, policies):
-        for seed_index, (model, kwargs) in enumerate(entries):
-            for task_set in spec.task_sets:
-                count = grid * grid if task_set.grid else (task_set.episodes or episodes)
-                work.append((method, model, kwargs, task_set, count))
+    work = [(name, index, run, task_set, episode_count(task_set, episodes, grid))
+            for name, runs in methods for index, run in enumerate(runs) for task_set in task_sets(spec, split)]
     bar = tqdm(work, desc=spec.short_name, disable=not progress)
-    for method, model, kwargs, task_set, count in bar:
-        bar.set_postfix_str(f"{method} {task_set.task}")
-        env_kwargs = dict(kwargs, task=task_set.task, task_split="test")
+    failed: set = set()
+    for name, index, run, task_set, count in bar:
+        if name in failed:
+            continue
+        bar.set_postfix_str(f"{name} {task_set.task}")
+        kwargs = dict(env_kwargs or {}, **run.env_kwargs, task=task_set.task, task_split=split)
         if task_set.grid:
-            env_kwargs["grid"] = grid
-        core = make_core(env_id, count, **env_kwargs)
-        policy = model if model is not None else ZeroResidual(core.single_action_space.shape[0])
-        traces = task_set.task == spec.trace_task
-        result = run_episodes(core, policy, np.arange(count), record=traces)
-        entry = results.setdefault(method, {}).setdefault(task_set.task, {"scores": {}, "traces": [],
-                                                                          "grid": task_set.grid})
+            kwargs["grid"] = grid
+        core = make_core(env_id, count, **kwargs)
+        action_dim = core.single_action_space.shape[0]
+        policy = ZeroResidual(action_dim) if run.policy is None else as_predictor(run.policy, name)
+        declared = getattr(policy, "observation_shape", None)
+        try:
+            if declared is not None and declared != core.single_observation_space.shape:
+                raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
+                                  f"{core.single_observation_space.shape} (is --env-kwargs the env it was trained in?)")
+            result = run_episodes(core, policy, np.arange(count), record=task_set.task == spec.trace_task)
+        except PolicyError as error:
+            failed.add(name)
+            skipped[f"{name}[{index}]"] = str(error)
+            print(f"continuum-gym evaluate: skipping {name} (run {index}): {error}", file=sys.stderr)
+            continue
+        entry = results.setdefault(name, {}).setdefault(task_set.task, {"scores": {}, "traces": [],
+                                                                        "grid": task_set.grid})
         for key, value in result.items():
             if not key.startswith("trace_"):
                 entry["scores"].setdefault(key, []).append(np.asarray(value))
-        if traces:
+        if task_set.task == spec.trace_task:
             entry["traces"].append({k: v[:, 0] for k, v in result.items() if k.startswith("trace_")})
+    for name in failed:  # a method is compared on every task set of every run, or not at all
+        results.pop(name, None)
     return results
+
+
+def clipped_fractions(results: dict) -> dict:
+    """{method: fraction of action components its policy returned outside [-1, 1] (clipped)}."""
+    out = {}
+    for method, tasks in results.items():
+        values = [np.concatenate(t["scores"]["action_clipped_fraction"]) for t in tasks.values()]
+        out[method] = float(np.mean(np.concatenate(values))) if values else 0.0
+    return out
 
 
 def grid_scores(task_result: dict, metric) -> np.ndarray:
@@ -196,7 +264,7 @@ def method_value(spec: EnvSpec, results: dict, method: str, task: str, metric_na
 
 
 def add_headroom(spec: EnvSpec, table: dict, results: dict) -> None:
-    """headroom_closed = (method - base) / (optimum - base) for learned methods, on ``spec.headroom``."""
+    """headroom_closed = (method - base) / (optimum - base) for every non-baseline method, on ``spec.headroom``."""
     task, metric = spec.headroom
     base = spec.headline_baseline
     if "offline_optimum" not in table or base not in results:
@@ -209,7 +277,7 @@ def add_headroom(spec: EnvSpec, table: dict, results: dict) -> None:
         return
     where = f"{task} grid, {metric}" if results[base][task]["grid"] else f"{task} tasks, {metric}"
     for method in results:
-        if method.startswith(("residual_", "pure_rl")):
+        if method not in spec.baselines:
             closed = (method_value(spec, results, method, task, metric) - reference) / (optimum - reference)
             table[method][HEADROOM] = {"mean": closed, "iqm": closed, "ci_low": closed, "ci_high": closed, "on": where}
 
@@ -256,58 +324,167 @@ def fmt(spec: EnvSpec, name: str, value: float) -> str:
     return f"{value:.3g}" if abs(value) < 0.01 else f"{value:.3f}"
 
 
+# ---------------------------------------------------------------------- API
+def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, env_kwargs: dict | None = None,
+                     episodes: int = 32, grid: int = 21, split: str = "test", progress: bool = True,
+                     references: bool = True) -> tuple[dict, dict, dict]:
+    """(table, results, metadata) of the baselines, the SB3 runs in ``policies`` and ``extra`` methods.
+
+    ``extra`` is [(name, [MethodRun])]; ``env_kwargs`` the protocol env every method runs in (its policy
+    keywords go to the ``extra`` methods only). The table has every baseline, the offline optimum of
+    this env (computed once and cached for a variant), each method and ``headroom_closed``.
+    """
+    from continuum_gym.evaluation.benchmark import metadata
+    from continuum_gym.evaluation.references import load_references
+
+    spec = get_spec(env_id)
+    check_sizes(episodes, grid)
+    environment, policy_kwargs, ignored = split_env_kwargs(spec, env_kwargs)
+    extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}) for run in runs])
+             for name, runs in extra]
+    skipped: dict = {}
+    methods = baseline_methods(spec) + discovered_methods(spec, policies or {}, skipped) + extra
+    results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
+    optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
+    table = aggregate(env_id, results, optimum, grid)
+    described = {name: {"runs": len(runs), "env_kwargs": [run.env_kwargs for run in runs]} for name, runs in methods}
+    meta = metadata(spec, split, episodes, grid, environment, ignored, described)
+    meta["skipped"] = skipped
+    meta["action_clipped_fraction"] = clipped_fractions(results)
+    return table, results, meta
+
+
+def evaluate_policy(policy: Any, env_id: str, *, name: str = "policy", env_kwargs: dict | None = None,
+                    episodes: int = 32, grid: int = 21, split: str = "test", progress: bool = True,
+                    out: str | Path | None = None) -> dict:
+    """The benchmark table of ``policy`` beside every baseline and the offline optimum of ``env_id``.
+
+    Args:
+        policy: a batched callable ``obs (N, d) -> actions (N, k)`` (numpy), an SB3 model, a
+            ``torch.nn.Module`` (forward: observations -> deterministic actions) or an object with
+            ``predict(obs)``; for ViewTracking ``d = 22`` and ``k = 6``, for OcclusionAvoidance ``d = 32``
+            and ``k = 8`` (the paper's robots; a zero policy gives exactly the base controller's row).
+        env_id: a ``ContinuumGym/`` id (or one registered to the library's entry points).
+        name: the policy's row in the table.
+        env_kwargs: the env keyword arguments the policy was trained with. Physics keywords (robot,
+            cone, limits; lengths in m) define the env every method runs in; ``spec.policy_keys``
+            (base controller, residual scale and space, ...) only the policy's; task keywords are set by
+            the protocol (recorded as ignored).
+        episodes: held-out episodes per random task set (>= 1).
+        grid: coverage grid points per axis (>= 2).
+        split: ``"validation"`` for model selection, ``"test"`` for final numbers only.
+        progress: progress bars.
+        out: a directory to also write ``results.md`` and ``results.json`` (the CLI's files) into.
+
+    Returns:
+        ``{method: {metric: {"mean", "iqm", "ci_low", "ci_high", ...}}}``, the per-env object of the CLI's JSON.
+    """
+    table, results, meta = evaluate_methods(env_id, [(str(name), [MethodRun(policy, {})])], None,
+                                            env_kwargs=env_kwargs, episodes=episodes, grid=grid, split=split,
+                                            progress=progress)
+    if name not in results:
+        from continuum_gym.evaluation.policies import PolicyError
+
+        raise PolicyError(meta["skipped"].get(f"{name}[0]", f"policy {name!r} was not evaluated"))
+    if out is not None:
+        write_results(Path(out), {env_id: table}, {env_id: meta}, [markdown(env_id, table, results)])
+    return table
+
+
+def check_sizes(episodes: int, grid: int) -> None:
+    """Named errors for evaluation sizes out of range."""
+    from continuum_gym.validation import integer
+
+    integer(episodes, "episodes", low=1)
+    integer(grid, "grid", low=2)
+
+
+def write_results(out: Path, summary: dict, meta: dict, report: list, json_path: str | Path | None = None,
+                  seconds: float | None = None) -> list:
+    """Write ``results.md`` and ``results.json`` (``json_path`` too) atomically; returns the paths written."""
+    from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
+
+    out.mkdir(parents=True, exist_ok=True)
+    text = "\n".join(report) + (f"\nEvaluation wall time: {seconds:.0f} s\n" if seconds is not None else "")
+    document = {**summary, "metadata": meta}
+    written = [write_text_atomic(out / "results.md", text), write_json_atomic(out / "results.json", document)]
+    if json_path:
+        written.append(write_json_atomic(json_path, document))
+    return written
+
+
 # ---------------------------------------------------------------------- CLI
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--policies", default=str(POLICY_DIR), help="directory of trained runs (default: shipped)")
+    parser.add_argument("--policies", default=str(POLICY_DIR),
+                        help="directory of trained SB3 runs (config.yml + model.zip; default: the shipped ones)")
+    parser.add_argument("--policy", default=None, metavar="MODULE:FUNCTION",
+                        help="also evaluate the policy returned by this function (any batched callable, SB3 model, "
+                             "torch.nn.Module or object with predict), e.g. my_pkg.agents:make_policy")
+    parser.add_argument("--name", default="policy", help="table row of --policy (default: policy)")
+    parser.add_argument("--env-kwargs", default=None, metavar="JSON",
+                        help="env keyword arguments (JSON object) the evaluated env is built with, e.g. the ones "
+                             "--policy was trained with; physics keywords apply to every method")
+    parser.add_argument("--split", default="test", choices=("validation", "test"),
+                        help="task split: validation for model selection, test for final numbers (default)")
     parser.add_argument("--episodes", type=int, default=32, help="held-out episodes per task set (default 32)")
     parser.add_argument("--grid", type=int, default=21, help="coverage grid points per axis (default 21)")
     parser.add_argument("--out", default="results/evaluate", help="directory for tables and figures")
-    parser.add_argument("--json", default=None, help="write <env> -> <method> -> <metric> -> stats JSON here")
-    parser.add_argument("--env", nargs="+", default=list(ENV_SPECS), help="environment ids to evaluate")
+    parser.add_argument("--json", default=None, help="also write the JSON (<env> -> <method> -> <metric> -> stats, "
+                                                     "plus metadata) here")
+    parser.add_argument("--env", nargs="+", default=None, help="environment ids (default: all, or the one of "
+                                                                "--policy's --env-kwargs)")
     parser.add_argument("--no-progress", action="store_true")
 
 
-def load_optimum() -> dict | None:
-    """The shipped offline-optimum cache, or None."""
-    if OPTIMUM_CACHE.exists():
-        return json.loads(OPTIMUM_CACHE.read_text())
-    return None
+def parse_env_kwargs(text: str | None) -> dict:
+    """The ``--env-kwargs`` JSON object, or a named error."""
+    if text is None:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"--env-kwargs: not valid JSON ({error})") from error
+    if not isinstance(value, dict):
+        raise ValueError(f"--env-kwargs: expected a JSON object of env keyword arguments, got {type(value).__name__}")
+    return value
 
 
 def run(args) -> int:
-    for env_id in args.env:
-        try:
-            get_spec(env_id)
-        except ValueError as error:
-            print(f"continuum-gym evaluate: {error}", file=sys.stderr)
-            return 2
-    if args.episodes < 1 or args.grid < 2:
-        print("continuum-gym evaluate: --episodes must be >= 1 and --grid >= 2", file=sys.stderr)
-        return 2
     try:
+        env_ids = list(args.env or ENV_SPECS)
+        for env_id in env_ids:
+            get_spec(env_id)
+        check_sizes(args.episodes, args.grid)
+        env_kwargs = parse_env_kwargs(args.env_kwargs)
+        if (args.policy or env_kwargs) and len(env_ids) != 1:
+            raise ValueError("--policy and --env-kwargs need one environment: pass --env <id>")
+        for env_id in env_ids:
+            split_env_kwargs(get_spec(env_id), env_kwargs)
         policies = discover_policies(args.policies)
-    except FileNotFoundError as error:
+        extra = []
+        if args.policy:
+            from continuum_gym.evaluation.policies import as_predictor, load_entry_point
+
+            extra = [(args.name, [MethodRun(as_predictor(load_entry_point(args.policy), args.name), {})])]
+    except (ValueError, TypeError, FileNotFoundError) as error:
         print(f"continuum-gym evaluate: {error}", file=sys.stderr)
         return 2
     from continuum_gym.evaluation.figures import draw
-    from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    optimum = load_optimum()
     started = time.perf_counter()
-    summary, report = {}, []
-    for env_id in args.env:
-        results = evaluate_env(env_id, policies, args.episodes, args.grid, progress=not args.no_progress)
-        table = aggregate(env_id, results, optimum, args.grid)
+    summary, meta, report = {}, {}, []
+    for env_id in env_ids:
+        table, results, meta[env_id] = evaluate_methods(
+            env_id, extra, policies, env_kwargs=env_kwargs, episodes=args.episodes, grid=args.grid,
+            split=args.split, progress=not args.no_progress)
         summary[env_id] = table
         report.append(markdown(env_id, table, results))
         for path in draw(env_id, results, table, policies, out):
             print(f"wrote {path}")
-    text = "\n".join(report) + f"\nEvaluation wall time: {time.perf_counter() - started:.0f} s\n"
-    print(text)
-    write_text_atomic(out / "results.md", text)
-    if args.json:
-        write_json_atomic(args.json, summary)
-        print(f"wrote {args.json}")
+    seconds = time.perf_counter() - started
+    print("\n".join(report) + f"\nEvaluation wall time: {seconds:.0f} s\n")
+    for path in write_results(out, summary, meta, report, args.json, seconds):
+        print(f"wrote {path}")
     return 0

@@ -33,14 +33,19 @@ def run_episodes(core, policy, task_ids, progress=None, record: bool = False) ->
 
     Args:
         core: a batched core with ``num_envs == len(task_ids)``.
-        policy: anything with SB3's ``predict(obs, deterministic=True)``.
+        policy: any policy :func:`~continuum_gym.evaluation.policies.as_predictor` takes (SB3 model,
+            batched callable, ``torch.nn.Module``, object with ``predict``); its answers are checked.
         task_ids: task instance per row.
         progress: optional tqdm-like object updated once per step.
         record: also return per-step traces (``trace_<value>`` arrays of shape (steps, N), NaN after the end).
 
     Returns:
-        dict of metric name -> (N,) array (the spec's episode metrics), plus ``return`` and ``length``.
+        dict of metric name -> (N,) array (the spec's episode metrics), plus ``return``, ``length`` and
+        ``action_clipped_fraction`` (the fraction of action components outside [-1, 1], clipped).
     """
+    from continuum_gym.evaluation.policies import as_predictor
+
+    predictor = as_predictor(policy)
     task_ids = np.asarray(task_ids, dtype=np.int64)
     n = len(task_ids)
     if core.num_envs != n:
@@ -53,9 +58,13 @@ def run_episodes(core, policy, task_ids, progress=None, record: bool = False) ->
     counts = np.zeros(n)
     returns = np.zeros(n)
     traces: dict = {}
+    clipped = np.zeros(n)
+    action_dim = core.single_action_space.shape[0]
     while active.any():
-        actions, _ = policy.predict(core.obs.astype(np.float32), deterministic=True)
-        actions = np.clip(np.asarray(actions, dtype=np.float64).reshape(n, -1), -1.0, 1.0)
+        actions = predictor.act(core.obs.astype(np.float32), action_dim)
+        outside = np.abs(actions) > 1.0
+        clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]
+        actions = np.clip(actions, -1.0, 1.0)
         rewards, terminated, truncated = core.step(np.ascontiguousarray(actions), active)
         alive = active.astype(bool)
         values = core.step_values()
@@ -77,6 +86,7 @@ def run_episodes(core, policy, task_ids, progress=None, record: bool = False) ->
             out[metric.name] = sums[metric.step_value] / np.maximum(counts, 1)
     out["return"] = returns
     out["length"] = counts
+    out["action_clipped_fraction"] = clipped / np.maximum(counts, 1)
     if record:
         out.update({f"trace_{key}": np.array(value) for key, value in traces.items()})
     return out

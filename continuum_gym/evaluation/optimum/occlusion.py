@@ -28,6 +28,7 @@ from continuum_gym.evaluation.optimum.self_motion import (
     TRACE_STEP,
     SelfMotionTracer,
     limit_arrays,
+    sample_self_motion,
     trace_self_motion,
     trace_self_motion_from,
 )
@@ -131,7 +132,7 @@ def _arc_minimum(robot, tracer, arc, intervals, cone, refine=True):
     for cell in flat:
         i, j = np.unravel_index(int(cell), V.shape)
         local_q = [Q[i]]
-        for neighbour in (i - 1, i + 1):
+        for neighbour in (i - 1, i + 1) if tracer is not None else ():  # sampled sets: refine gamma only
             if 0 <= neighbour < len(Q):
                 t = tracer.direction(Q[i], (Q[neighbour] - Q[i]) / tracer.scale)
                 points, _ = tracer.walk(Q[i].copy(), t, 8, step=tracer.step / 8.0)
@@ -173,20 +174,21 @@ def hold_optimum(robot, q0, limits, visibility=VISIBILITY, cone=None, step=TRACE
 
 
 def _hold(robot, q0, limits, visibility, cone, step, refine):
-    """``hold_optimum`` and the traced arc."""
+    """``hold_optimum`` and the traced arc (the sampled self-motion set for a robot whose DoF is not 7)."""
     visibility = visibility_fraction(visibility)
     cone = LensCone() if cone is None else cone
-    arc = trace_self_motion(robot, q0, limits, step=step)
+    sampled = robot.dof != 7
+    arc = sample_self_motion(robot, q0, limits) if sampled else trace_self_motion(robot, q0, limits, step=step)
     tip, _ = robot.forward_kinematics(np.asarray(q0, dtype=float))
     intervals = feasible_gamma_intervals(tip, visibility, cone)
     out = {"gamma_intervals": [list(map(float, iv)) for iv in intervals], "arc_points": int(len(arc.q)),
            "closed": bool(arc.closed), "ends": list(arc.ends)}
     if not intervals:
-        out.update(voi=math.nan, q=np.full(7, np.nan), gamma=math.nan, at_visibility_bound=False)
+        out.update(voi=math.nan, q=np.full(robot.dof, np.nan), gamma=math.nan, at_visibility_bound=False)
         return out, arc
     p0, R0 = robot.forward_kinematics(arc.q[arc.start_index])
-    lower, upper = limit_arrays(limits)
-    tracer = SelfMotionTracer(robot, p0, R0, lower, upper, step, NEWTON_TOLERANCE)
+    lower, upper = limit_arrays(limits, robot.n_segments)
+    tracer = None if sampled else SelfMotionTracer(robot, p0, R0, lower, upper, step, NEWTON_TOLERANCE)
     voi, q, gamma = _arc_minimum(robot, tracer, arc, intervals, cone, refine)
     at_bound = any(min(abs(gamma - lo), abs(gamma - hi)) < 1e-9 for lo, hi in intervals)
     out.update(voi=voi, q=q, gamma=gamma, at_visibility_bound=bool(at_bound))
@@ -242,11 +244,12 @@ def projected_gradient_hold(robot, starts, limits, steps=HOLD_ITERATIONS, visibi
 
 
 def _hold_job(job):
-    robot = MultiBackboneRobot()
+    robot = job.get("robot") or MultiBackboneRobot()
+    cone = job.get("cone")
     limits = OcclusionLimits(max_bend=job["max_bend"], insertion=tuple(job["insertion"]))
-    result, arc = _hold(robot, job["q0"], limits, job["visibility"], None, TRACE_STEP, True)
+    result, arc = _hold(robot, job["q0"], limits, job["visibility"], cone, TRACE_STEP, True)
     # self-motion alone at the centring gamma (the projected gradient's law)
-    centred = occlusion_details(robot, arc.q, job["centring_gamma"])["voi"]
+    centred = occlusion_details(robot, arc.q, job["centring_gamma"], cone)["voi"]
     result["centring_gamma_voi"] = float(centred.min())
     return result
 
@@ -375,19 +378,23 @@ def _project_inside(tracer, chain):
     raise RuntimeError("circle_optimum: no point of the previous arc projects within the limits")
 
 
-def env_hold_test_optimum(n_tasks=ENV_HOLD_TASKS, limits=None, visibility=VISIBILITY, workers=2, progress=True):
-    """Hold optimum on the OcclusionAvoidance environment's held-out hold tasks (test ids 0..n-1).
+def env_hold_test_optimum(n_tasks=ENV_HOLD_TASKS, limits=None, visibility=VISIBILITY, workers=2, progress=True,
+                          robot=None, cone=None, split="test"):
+    """Hold optimum on the OcclusionAvoidance environment's held-out hold tasks (ids 0..n-1 of ``split``).
 
     These are the instances ``continuum-gym evaluate`` scores, so ``headroom_closed`` compares each
-    method with the best configuration-and-gamma on exactly the same tasks.
+    method with the best configuration-and-gamma on exactly the same tasks. ``robot`` and ``cone`` (None:
+    the paper's) give the ceiling of a variant; its hold starts are the env's own for that robot.
     """
     from continuum_gym.envs.tasks import hold_start_pool
 
     limits = OcclusionLimits() if limits is None else limits
-    starts = np.asarray(hold_start_pool("test", float(limits.max_bend), tuple(limits.insertion)))
+    variant = () if robot is None and cone is None else (robot or MultiBackboneRobot(), cone or LensCone())
+    starts = np.asarray(hold_start_pool(split, float(limits.max_bend), tuple(limits.insertion), *variant))
     starts = starts[:positive_int(n_tasks, "n_tasks")]
-    jobs = [{"q0": q0, "max_bend": limits.max_bend, "insertion": limits.insertion, "visibility": visibility_fraction(visibility),
-             "centring_gamma": 0.0} for q0 in starts]
+    jobs = [{"q0": q0, "max_bend": limits.max_bend, "insertion": limits.insertion,
+             "visibility": visibility_fraction(visibility), "centring_gamma": 0.0, "robot": robot, "cone": cone}
+            for q0 in starts]
     results = map_jobs(_hold_job, jobs, positive_int(workers, "workers"), progress, "env hold tasks")
     voi = np.array([r["voi"] for r in results])
     return {"task_ids": list(range(len(starts))), "optimum_voi": rounded(voi),

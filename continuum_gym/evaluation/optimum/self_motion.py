@@ -292,3 +292,40 @@ def trace_self_motion_from(tracer, q0, max_steps=20_000):
         return SelfMotion(np.array([q0] + forward), 0, True, ("loop", "loop"))
     backward, reason_b = tracer.walk(q0.copy(), -t0, max_steps, origin=q0)
     return SelfMotion(np.array(backward[::-1] + [q0] + forward), len(backward), False, (reason_b, reason_f))
+
+
+def sample_self_motion(robot, q0, limits, samples: int = 1500, step: float = 0.05, seed: int = 0) -> SelfMotion:
+    """Configurations with the tip pose of q0 within ``limits``, for a robot whose DoF is not 7.
+
+    With fewer than 7 joints a 6-D tip pose is (generically) held by isolated configurations: the set
+    is q0 alone. With 9 (4 segments) it is a 3-D manifold, sampled by a seeded random walk: a step of
+    ``step`` (rad-equivalent, insertion scaled by ``INSERTION_SCALE``) along a random direction of the
+    Jacobian's null space, corrected by Newton onto the manifold, kept if it converged within the
+    limits. The minimum over the samples is a ceiling from above (the true optimum may be a little lower).
+    """
+    q0 = np.asarray(q0, dtype=float)
+    if robot.dof < 7:
+        return SelfMotion(q0[None].copy(), 0, False, ("isolated", "isolated"))
+    lower, upper = limit_arrays(limits, robot.n_segments)
+    p0, R0 = robot.forward_kinematics(q0)
+    scale = np.ones(robot.dof)
+    scale[-1] = INSERTION_SCALE
+    args = robot.kernel_args()
+    rng = np.random.default_rng(seed)
+    points = [q0.copy()]
+    q = q0.copy()
+    for _ in range(int(samples) * 4):
+        if len(points) >= samples:
+            break
+        _, _, J = robot.forward_kinematics_and_jacobian(q)
+        _, _, vt = np.linalg.svd(J * scale)
+        null = vt[6:]
+        direction = rng.normal(size=null.shape[0]) @ null
+        candidate = np.ascontiguousarray(q + step * direction / np.linalg.norm(direction) * scale)
+        iterations, _, _ = _newton_project(candidate, p0, R0, args, scale, NEWTON_TOLERANCE, NEWTON_MAX_ITERATIONS)
+        if iterations >= 0 and np.all(candidate >= lower) and np.all(candidate <= upper):
+            q = candidate
+            points.append(q.copy())
+        elif rng.random() < 0.1:  # stuck at a limit: restart the walk from a sample already found
+            q = points[int(rng.integers(len(points)))].copy()
+    return SelfMotion(np.array(points), 0, False, ("sampled", "sampled"))

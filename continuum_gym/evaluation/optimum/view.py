@@ -272,7 +272,7 @@ def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, eff
     lower, upper = view_bounds(robot, math.pi)
     jobs = []
     for k in range(n):
-        jobs.append({"index": k, "robot": robot.kernel_args(), "p_a": np.ascontiguousarray(p_a[k]),
+        jobs.append({"index": k, "robot": robot.kernel_args(), "endoscope": robot, "p_a": np.ascontiguousarray(p_a[k]),
                      "R_a": np.ascontiguousarray(R_a[k]), "frustum": (frustum.tan_half, frustum.near, frustum.far),
                      "lower": lower, "upper": upper, "effort": effort, "seed": int(seed) + k,
                      "p_t": p_t[k], "R_t": R_t[k], "starts": {name: q[k] for name, q in starts.items()}})
@@ -300,7 +300,7 @@ def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, eff
 
 def _view_job_with_lsq(job):
     """Worker: bounded LSQ fit for the point (a start), then the OR optimum."""
-    robot = ContinuumEndoscope(*job["robot"])
+    robot = job["endoscope"]
     lower, upper = view_bounds(robot, 3.0 * math.pi)
     job = dict(job)
     job["starts"] = dict(job["starts"])
@@ -310,7 +310,7 @@ def _view_job_with_lsq(job):
 
 
 def coverage_optimum(grid=COVERAGE_GRID, workers=2, progress=True, global_check=GLOBAL_CHECK_SAMPLE,
-                     seed=OPTIMUM_SEED):
+                     seed=OPTIMUM_SEED, robot=None, davinci=None, effort="standard"):
     """Coverage of the paper's map (L_dV = 65 mm, roll 0, yaw/pitch in [-60, 60] deg, OR > 0.8).
 
     Returns a dict with the cache keys of ``coverage`` (percentages, mean OR, per-point OR maps of the
@@ -321,7 +321,8 @@ def coverage_optimum(grid=COVERAGE_GRID, workers=2, progress=True, global_check=
     grid = grid_size(grid)
     q_davinci = coverage_grid(grid)
     started = time.perf_counter()
-    result = view_tracking_optimum(q_davinci, effort="standard", seed=seed, workers=workers, progress=progress)
+    result = view_tracking_optimum(q_davinci, robot=robot, davinci=davinci, effort=effort, seed=seed, workers=workers,
+                                   progress=progress)
     elapsed = time.perf_counter() - started
     threshold = COVERAGE_THRESHOLD
     optimum = result["overlap"]
@@ -354,8 +355,8 @@ def coverage_optimum(grid=COVERAGE_GRID, workers=2, progress=True, global_check=
     if global_check:
         indices = _global_check_sample(optimum, threshold, int(global_check), seed)
         started = time.perf_counter()
-        heavy = view_tracking_optimum(q_davinci[indices], effort="heavy", seed=seed + 10_000, workers=workers,
-                                      progress=progress)
+        heavy = view_tracking_optimum(q_davinci[indices], robot=robot, davinci=davinci, effort="heavy",
+                                      seed=seed + 10_000, workers=workers, progress=progress)
         gap = heavy["overlap"] - optimum[indices]
         out["global_check"] = {
             "indices": indices.tolist(),
