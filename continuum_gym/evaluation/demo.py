@@ -7,32 +7,14 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.baselines import (
-    DimensionReduced,
-    MinimumNorm,
-    ProjectedGradient,
-    ResolvedRate,
-)
-from continuum_gym.baselines.scenarios import (
-    CASE_STUDIES,
-    CASE_STUDY_START,
-    HOLD_ITERATIONS,
-    CircleTask,
-)
-from continuum_gym.geometry import overlap_ratio, visual_occlusion_index
-from continuum_gym.robots import (
-    ContinuumEndoscope,
-    DaVinciEndoscope,
-    MultiBackboneRobot,
-    rotation_vector,
-)
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="results/demo", help="output directory for demo.png (default: %(default)s)")
 
 
 def _pose_line(name, p, R):
+    from continuum_gym.robots import rotation_vector
+
     rotvec = rotation_vector(R)
     return (f"  {name:<34s} p = [{p[0] * 1e3:8.3f} {p[1] * 1e3:8.3f} {p[2] * 1e3:8.3f}] mm   "
             f"log R = [{rotvec[0]:7.4f} {rotvec[1]:7.4f} {rotvec[2]:7.4f}] rad")
@@ -40,6 +22,10 @@ def _pose_line(name, p, R):
 
 def occlusion_snapshots():
     """Configurations of paper 000 to draw: task (a) start/end, circle snapshots (min-norm vs min-potential)."""
+    from continuum_gym.baselines import MinimumNorm, ProjectedGradient
+    from continuum_gym.baselines.scenarios import HOLD_ITERATIONS, CircleTask
+    from continuum_gym.robots import MultiBackboneRobot
+
     robot = MultiBackboneRobot()
     p0, R0 = robot.forward_kinematics(robot.psi_a)
     q_hold, _ = ProjectedGradient(rotate_endoscope=False).rollout(
@@ -63,6 +49,9 @@ def run(args) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    # Imported here, not at module level, so that `continuum-gym demo --help` answers at once.
+    from continuum_gym.baselines import DimensionReduced, ResolvedRate
+    from continuum_gym.baselines.scenarios import CASE_STUDIES, CASE_STUDY_START
     from continuum_gym.evaluation.drawing import (
         draw_backbone,
         draw_cone,
@@ -71,6 +60,8 @@ def run(args) -> int:
         draw_frustum,
         set_equal_3d,
     )
+    from continuum_gym.geometry import overlap_ratio, visual_occlusion_index
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

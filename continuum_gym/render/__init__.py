@@ -10,11 +10,27 @@
   scenes import it when they are built.
 """
 
-from continuum_gym.render.occlusion import clear_scene_cache, pixel_occlusion
-from continuum_gym.render.occlusion_scene import OcclusionScene
-from continuum_gym.render.scene import CAMERAS_OCCLUSION, CAMERAS_VIEW_TRACKING
-from continuum_gym.render.textures import tissue_texture
-from continuum_gym.render.view_scene import ViewTrackingScene
+from __future__ import annotations
 
-__all__ = ["OcclusionScene", "ViewTrackingScene", "pixel_occlusion", "clear_scene_cache", "CAMERAS_OCCLUSION",
-           "CAMERAS_VIEW_TRACKING", "tissue_texture"]
+import importlib
+from typing import Any
+
+# Lazy, so that ``continuum-gym render --help`` does not load the compiled geometry.
+_EXPORTS = {
+    "OcclusionScene": "continuum_gym.render.occlusion_scene",
+    "ViewTrackingScene": "continuum_gym.render.view_scene",
+    "pixel_occlusion": "continuum_gym.render.occlusion",
+    "clear_scene_cache": "continuum_gym.render.occlusion",
+    "CAMERAS_OCCLUSION": "continuum_gym.render.scene",
+    "CAMERAS_VIEW_TRACKING": "continuum_gym.render.scene",
+    "tissue_texture": "continuum_gym.render.textures",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'continuum_gym.render' has no attribute {name!r}")
+
+
+__all__ = sorted(_EXPORTS)

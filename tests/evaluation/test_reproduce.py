@@ -42,9 +42,8 @@ def test_quick_reproduction_writes_figures_and_table(quick_results):
 
 
 def test_bad_cli_input_exits_non_zero(capsys):
-    with pytest.raises(SystemExit) as error:
-        main(["reproduce", "--grid", "1", "--out", "/tmp/never"])
-    assert error.value.code != 0
+    assert main(["reproduce", "--grid", "1", "--out", "/tmp/never"]) == 2
+    assert "--grid must be an integer >= 2" in capsys.readouterr().err
     with pytest.raises(SystemExit) as error:
         main(["no-such-command"])
     assert error.value.code == 2
