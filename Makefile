@@ -3,18 +3,26 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup demo test test-fast bench reproduce clean
+.PHONY: setup setup-test demo test test-fast bench reproduce docs clean
 
+# The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# The local CPU wheel first: a bare `torch` requirement would pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e .
 	touch $(STAMP)
 
+$(TEST_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[test]'
+	touch $(TEST_STAMP)
+
 setup: $(STAMP)
+
+setup-test: $(TEST_STAMP)
 
 # The main job: analytic baselines and the shipped residual / pure-RL policies on held-out tasks,
 # the comparison table (printed, results/evaluate/results.md, .json) and figures; plus the robots' picture.
@@ -25,13 +33,13 @@ demo: setup
 reproduce: setup
 	$(BIN)/continuum-gym reproduce --out results/reproduce --json results/reproduce/reproduce.json
 
-test: setup
+test: setup-test
 	$(BIN)/python -m pytest -q -n 2
 
-test-fast: setup
+test-fast: setup-test
 	$(BIN)/python -m pytest -q -n 2 -m "not slow"
 
-bench: setup
+bench: setup-test
 	$(BIN)/python benchmarks/kinematics.py --json results/bench/kinematics.json
 
 clean:
