@@ -6,6 +6,7 @@ JSON keys (steps per second): ``single.<id>``, ``cartpole``, ``sync64.<id>``, ``
 ``profile.<id>`` (microseconds per step spent in the compiled kernel, the core wrapper, the env API and
 Gymnasium's wrappers), ``memory.native4096.<id>`` (MiB added by a 4096-robot vector env) and
 ``guard.off`` / ``guard.on`` (OcclusionAvoidance N=64 under random residual actions, visibility guard off / on).
+``units`` maps each key (pattern) to its unit; ``source`` is the ``continuum_gym`` that was timed.
 """
 
 from __future__ import annotations
@@ -23,7 +24,27 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import finish, machine, print_table  # noqa: E402
 
-import continuum_gym  # noqa: E402,F401
+import continuum_gym  # noqa: E402
+
+
+#: Unit of every numeric result key (fnmatch patterns over the flattened, dot-joined keys), so that a
+#: comparison across revisions (benchmarks/compare.py) knows which direction is better. "(derived)"
+#: marks differences of separately timed quantities: they are shown, never judged.
+UNITS = {
+    "cartpole": "steps/s (control)",  # Gymnasium's own env: the same code in every revision
+    "single.*": "steps/s",
+    "sync64.*": "steps/s",
+    "native.*": "steps/s",
+    "guard.*": "steps/s",
+    "profile.*.core_step_us": "us",
+    "profile.*.env_step_us": "us",
+    "profile.*.wrapped_step_us": "us",
+    "profile.*.wrappers_us": "us (derived)",
+    "profile.*.env_api_us": "us (derived)",
+    "memory.*": "MiB",
+    "peak_rss_mib": "MiB",
+    "machine.*": "info",
+}
 
 
 def rate(step, seconds, warmup=20):
@@ -84,7 +105,8 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="short timings (smoke test)")
     args = parser.parse_args(argv)
     seconds = 0.5 if args.quick else 3.0
-    results = {"machine": machine(), "unit": "environment steps per second"}
+    results = {"machine": machine(), "unit": "environment steps per second", "units": UNITS,
+               "source": continuum_gym.__file__}
     rows = []
     cartpole, _ = single_env_rate("CartPole-v1", seconds)
     results["cartpole"] = cartpole

@@ -3,7 +3,8 @@
     python benchmarks/kinematics.py [--json PATH] [--quick]
 
 Each row reports calls (or robots) per second of the library and of the reference, and the ratio.
-Before timing, each pair is checked to compute the same numbers.
+Before timing, each pair is checked to compute the same numbers. The JSON's ``units`` maps each key
+(pattern) to its unit; ``source`` is the ``continuum_gym`` that was timed.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from numpy_reference_endoscope import endoscope_fk_jacobian_numpy  # noqa: E402
 from numpy_reference_mbcr import fk_jacobian_numpy, potential_gradient_numpy, voi_numpy  # noqa: E402
 from numpy_reference_overlap import overlap_ratio_numpy  # noqa: E402
 
+import continuum_gym  # noqa: E402
 from continuum_gym.geometry import (  # noqa: E402
     Frustum,
     overlap_ratio,
@@ -36,6 +38,18 @@ from continuum_gym.robots import (  # noqa: E402
 )
 
 BATCH = 4096
+
+#: Unit of every numeric result key (fnmatch patterns over the flattened, dot-joined keys), read by
+#: benchmarks/compare.py. The numpy references run the same plain code in every revision, so they are
+#: a control for the machine's speed; microseconds and ratio are restatements of the rates.
+UNITS = {
+    "*.per_second": "calls/s",
+    "*.reference_per_second": "calls/s (control)",
+    "*.microseconds": "us (derived)",
+    "*.ratio": "x (derived)",
+    "peak_rss_mib": "MiB",
+    "machine.*": "info",
+}
 
 
 def main(argv=None) -> int:
@@ -73,7 +87,8 @@ def main(argv=None) -> int:
     assert abs(float(overlap_ratio(p_a, R_a, p_b, R_b)) - overlap_ratio_numpy(p_a, R_a, p_b, R_b, frustum)) < 1e-9
 
     rows = []
-    results = {"machine": machine(), "unit": "calls per second (batched rows: robots or pairs per second)"}
+    results = {"machine": machine(), "unit": "calls per second (batched rows: robots or pairs per second)",
+               "units": UNITS, "source": continuum_gym.__file__}
 
     def record(key, label, fast_seconds_per_item, ref_seconds_per_item, ref_label):
         fast = 1.0 / fast_seconds_per_item
