@@ -61,6 +61,7 @@ def check_actions(actions, shape, name="action") -> tuple[np.ndarray, np.ndarray
 
 #: Batches at least this large are stepped on all cores (rows are independent, results identical).
 PARALLEL_MIN_ROWS = 32
+PARALLEL_BALANCE_ROWS = 256
 _EXECUTORS: dict = {}
 
 
@@ -71,7 +72,9 @@ def parallel_chunks(num_envs: int) -> int:
     threads = numba.get_num_threads()
     if num_envs < PARALLEL_MIN_ROWS or threads < 2:
         return 1
-    return min(num_envs, 4 * threads)
+    # Each chunk's call unboxes the kernel bundles holding the GIL (~10 us): one chunk per thread for
+    # small batches; for large ones more chunks than threads even out rows that end early.
+    return threads if num_envs < PARALLEL_BALANCE_ROWS else 4 * threads
 
 
 def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int) -> None:

@@ -169,7 +169,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
     qdot = np.empty(dof)
     base_cmd = out.base_cmd
-    if env.has_base and custom.active:
+    if env.has_base and custom is not None:
         custom.rates[0](q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, custom.params, work.full_cmd)
         tip_kernel(q, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
@@ -267,7 +267,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
             gd = base_cmd[i, dof]
             if env.has_base and env.nullspace:
                 tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
-        elif env.has_base and custom.active:
+        elif env.has_base and custom is not None:
             desired_point(tasks, i, t, p_des, v_des)
             R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
             custom.rates[0](q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, custom.params, work.full_cmd)
@@ -345,7 +345,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     total = 0.0
     for k in range(N_TERMS_REWARD):
         total += terms[i, k]
-    if len(terms_slot.fns) > 0:  # registered compiled terms, after the built-in ones
+    if terms_slot is not None:  # registered compiled terms, after the built-in ones
         total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_TERMS_REWARD)
     out.rewards[i] = total
 

@@ -80,7 +80,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch,
     davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
     qdot = np.empty(6)
     base_cmd = out.base_cmd
-    if env.has_base and custom.active:
+    if env.has_base and custom is not None:
         custom.rates[0](q, p_tgt, R_dv, control_dt, robot, custom.params, qdot)
         eps_p, eps_r = view_errors(q, p_tgt, R_dv, robot, scratch)
         for k in range(6):
@@ -149,7 +149,7 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
     for a in range(3):
         for b in range(3):
             R_goal[a, b] = turn[a, 0] * R_dv[0, b] + turn[a, 1] * R_dv[1, b] + turn[a, 2] * R_dv[2, b]
-    if custom.active:
+    if custom is not None:
         custom.rates[0](q, p_tgt, R_goal, env.control_dt, robot, custom.params, cmd)
     else:
         view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
@@ -201,7 +201,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
     total = 0.0
     for k in range(N_REWARD_TERMS):
         total += terms[i, k]
-    if len(terms_slot.fns) > 0:  # registered compiled terms, after the built-in ones
+    if terms_slot is not None:  # registered compiled terms, after the built-in ones
         total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_REWARD_TERMS)
     out.rewards[i] = total
 
