@@ -20,30 +20,83 @@ class InfoField:
     """An ``info`` entry: ``read(core)`` returns its (N, ...) values; ``scalar`` converts one row's value."""
 
     name: str
-    read: Callable[[Any], np.ndarray]
+    read: Callable[[Any], np.ndarray]  #: (N, ...) values; a reader with ``row(core, row)`` also reads one row
     scalar: type | None = float
     doc: str = ""
 
 
-def column(attribute: str, index: int, kind: type = float) -> Callable[[Any], np.ndarray]:
-    """Reader of column ``index`` of the core's array ``attribute`` (as ``kind``: float or bool)."""
-    if kind is bool:
-        return lambda core: getattr(core, attribute)[:, index] != 0
-    return lambda core: getattr(core, attribute)[:, index]
+class Column:
+    """Reader of column ``index`` of the core's (N, k) array ``attribute`` (as ``kind``: float or bool)."""
+
+    def __init__(self, attribute: str, index: int, kind: type = float):
+        self.attribute, self.index, self.kind = attribute, index, kind
+
+    def __call__(self, core) -> np.ndarray:
+        values = getattr(core, self.attribute)[:, self.index]
+        return values != 0 if self.kind is bool else values
+
+    def row(self, core, row: int) -> Any:
+        value = getattr(core, self.attribute)[row, self.index]
+        return value != 0 if self.kind is bool else value
 
 
-def bits(attribute: str, index: int) -> Callable[[Any], np.ndarray]:
+class Bits:
     """Reader of a per-joint bit mask stored in column ``index`` of ``attribute``: (N, dof) bools."""
-    def read(core) -> np.ndarray:
-        values = getattr(core, attribute)[:, index]
+
+    def __init__(self, attribute: str, index: int):
+        self.attribute, self.index = attribute, index
+
+    def __call__(self, core) -> np.ndarray:
+        values = getattr(core, self.attribute)[:, self.index]
         return ((values[:, None] >> np.arange(core.dof)) & 1).astype(bool)
 
-    return read
+    def row(self, core, row: int) -> np.ndarray:
+        value = int(getattr(core, self.attribute)[row, self.index])
+        return np.array([(value >> k) & 1 for k in range(core.dof)], dtype=bool)
 
 
-def attribute(name: str) -> Callable[[Any], np.ndarray]:
-    """Reader of a per-row array attribute of the core (e.g. ``gamma``, ``base_cmd``)."""
-    return lambda core: getattr(core, name)
+class Attribute:
+    """Reader of a per-row array of the core, by a dotted path (``gamma``, ``base_cmd``, ``tasks.task_id``)."""
+
+    def __init__(self, path: str):
+        self.path = path.split(".")
+
+    def __call__(self, core) -> np.ndarray:
+        value = core
+        for part in self.path:
+            value = getattr(value, part)
+        return value
+
+    def row(self, core, row: int) -> Any:
+        return self(core)[row]
+
+
+class AtMost:
+    """Reader of ``attribute[:, index] <= bound`` (bools)."""
+
+    def __init__(self, attribute: str, index: int, bound: float):
+        self.attribute, self.index, self.bound = attribute, index, bound
+
+    def __call__(self, core) -> np.ndarray:
+        return getattr(core, self.attribute)[:, self.index] <= self.bound
+
+    def row(self, core, row: int) -> Any:
+        return getattr(core, self.attribute)[row, self.index] <= self.bound
+
+
+def column(attribute: str, index: int, kind: type = float) -> Column:
+    """Reader of column ``index`` of the core's array ``attribute`` (as ``kind``: float or bool)."""
+    return Column(attribute, index, kind)
+
+
+def bits(attribute: str, index: int) -> Bits:
+    """Reader of a per-joint bit mask stored in column ``index`` of ``attribute``: (N, dof) bools."""
+    return Bits(attribute, index)
+
+
+def attribute(name: str) -> Attribute:
+    """Reader of a per-row array attribute of the core (e.g. ``gamma``, ``base_cmd``, ``tasks.task_id``)."""
+    return Attribute(name)
 
 
 def info_batch(fields: Sequence[InfoField], core) -> dict:
@@ -55,8 +108,9 @@ def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
     """{name: value} of one row: Python scalars for scalar fields, fresh arrays for the others."""
     out = {}
     for f in fields:
-        value = f.read(core)[row]
-        out[f.name] = value.copy() if f.scalar is None else f.scalar(value)
+        read_row = getattr(f.read, "row", None)  # one element, not the whole batch's column
+        value = read_row(core, row) if read_row is not None else f.read(core)[row]
+        out[f.name] = np.array(value) if f.scalar is None else f.scalar(value)
     return out
 
 

@@ -11,11 +11,10 @@ from continuum_gym.envs.batched import (
     ContinuumEnv,
     ContinuumVectorEnv,
     parallel_chunks,
-    run_in_chunks,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import OcclusionConfig
-from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
+from continuum_gym.envs.info import AtMost, InfoField, attribute, bits, column, fields_table
 from continuum_gym.envs.occlusion_kernel import (
     FLAG_BASE_FROZEN,
     FLAG_BASE_SATURATED,
@@ -51,7 +50,7 @@ INFO_FIELDS = (
               "tip orientation error (rad)"),
     InfoField("tip_view_fraction", column("metrics", METRIC_VIEW_FRACTION), float,
               "tip angle from the view axis / cone half-angle"),
-    InfoField("tip_in_view", lambda core: core.metrics[:, METRIC_VIEW_FRACTION] <= VISIBILITY_FRACTION, bool,
+    InfoField("tip_in_view", AtMost("metrics", METRIC_VIEW_FRACTION, VISIBILITY_FRACTION), bool,
               "tip within 0.7 of the half-angle"),
     InfoField("gamma", attribute("gamma"), float, "endoscope rotation (rad)"),
     InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a position limit (dof,)"),
@@ -66,7 +65,7 @@ INFO_FIELDS = (
     InfoField("visibility_guarded", column("flags", FLAG_GUARDED, bool), bool,
               "the visibility guard cut the residual's endoscope rotation"),
     InfoField("base_command", attribute("base_cmd"), None, "the baseline's command at the new state (dof + 1,)"),
-    InfoField("task_id", lambda core: core.tasks.task_id, int, "task instance"),
+    InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
     InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
 )
 
@@ -77,6 +76,7 @@ class OcclusionCore(BatchedCore):
     spec = OCCLUSION_SPEC
     config_class = OcclusionConfig
     builtin_reward_names = REWARD_TERMS
+    step_kernel = staticmethod(occlusion_step_batch)
     info_fields = INFO_FIELDS
     metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
@@ -155,8 +155,8 @@ class OcclusionCore(BatchedCore):
                                 self._custom, self._out)
 
     def step(self, actions: np.ndarray, active: np.ndarray):
-        run_in_chunks(occlusion_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env,
-                                             self._custom, self._reward_slot, self._out), self.num_envs, self.n_chunks)
+        self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,
+                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks)
         self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 

@@ -13,7 +13,6 @@ from continuum_gym.envs.batched import (
     ContinuumEnv,
     ContinuumVectorEnv,
     parallel_chunks,
-    run_in_chunks,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import ViewTrackingConfig
@@ -60,7 +59,7 @@ INFO_FIELDS = (
     InfoField("rate_saturated", column("flags", FLAG_RATE_SATURATED, bool), bool,
               "joint rates scaled down to ``rate_limits``"),
     InfoField("base_command", attribute("base_cmd"), None, "the baseline's joint rates at the new state (6,)"),
-    InfoField("task_id", lambda core: core.tasks.task_id, int, "task instance"),
+    InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
     InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
 )
 
@@ -71,6 +70,7 @@ class ViewTrackingCore(BatchedCore):
     spec = VIEW_SPEC
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
+    step_kernel = staticmethod(view_step_batch)
     info_fields = INFO_FIELDS
     metric_columns = {"overlap_ratio": METRIC_OR, "position_error_m": METRIC_POSITION_ERROR,
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR}
@@ -140,8 +140,8 @@ class ViewTrackingCore(BatchedCore):
                            self._custom, self._out)
 
     def step(self, actions: np.ndarray, active: np.ndarray):
-        run_in_chunks(view_step_batch, (self._state, actions, active, self._tasks, *self._model, self._env,
-                                        self._custom, self._reward_slot, self._out), self.num_envs, self.n_chunks)
+        self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,
+                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks)
         self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 

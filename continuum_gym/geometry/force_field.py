@@ -63,10 +63,12 @@ class ForceField:
         positive(self.f_star, "f_star", "N")
         positive(self.p, "p", "-")
         positive(self.q, "q", "-")
+        object.__setattr__(self, "_kernel_args", FieldKernelArgs(float(self.d0), float(self.r_star),
+                                                                 float(self.f_star), float(self.p), float(self.q)))
 
     def kernel_args(self) -> FieldKernelArgs:
         """(d0, r_star, f_star, p, q): the bundle the force kernels read."""
-        return FieldKernelArgs(float(self.d0), float(self.r_star), float(self.f_star), float(self.p), float(self.q))
+        return self._kernel_args
 
 
 DEFAULT_FIELD = ForceField()

@@ -237,6 +237,14 @@ def _kinematics_batch(Q, robot, p_cam, w_R_cam, p_ct, J, with_jacobian):
                              with_jacobian)
 
 
+@njit(cache=True)
+def _kinematics_single(q, L1, Lm, L2, Lc, Le, p_cam, w_R_cam, p_ct, J, with_jacobian):
+    # Plain floats, not the bundle: unboxing a namedtuple argument costs ~0.7 us per call.
+    _require_finite(q)
+    endoscope_kinematics(q, EndoscopeKernelArgs(L1, Lm, L2, Lc, Le), make_endoscope_workspace(), p_cam, w_R_cam,
+                         p_ct, J, with_jacobian)
+
+
 # placeholder for J when only forward kinematics are asked for (never written)
 _UNUSED_J = np.empty((1, 6, 6))
 
@@ -419,11 +427,21 @@ class ContinuumEndoscope:
     # -- kinematics ----------------------------------------------------------------------------
     def _run(self, q, with_jacobian):
         """reshape -> kernel -> reshape: ``(p_cam, w_R_cam, p_ct, J or None)`` with q's leading shape."""
+        if type(q) is np.ndarray and q.shape == (DOF,) and q.dtype == np.float64 and q.flags.c_contiguous:
+            # one configuration, already in the kernel's layout: the controllers' per-step call
+            p_cam, w_R_cam, p_ct = np.empty(3), np.empty((3, 3)), np.empty(3)
+            J = np.empty((6, 6)) if with_jacobian else _UNUSED_J[0]
+            try:
+                _kinematics_single(q, *self._args, p_cam, w_R_cam, p_ct, J, with_jacobian)
+            except ValueError:
+                as_configuration(q, DOF)  # raises "q must be finite ..."
+                raise
+            return p_cam, w_R_cam, p_ct, (J if with_jacobian else None)
         array = np.ascontiguousarray(as_array(q, "q", (DOF,)))
         if array.ndim == 0:
             raise ValueError(f"q must have shape (..., {DOF}); got a scalar")
         lead = array.shape[:-1]
-        n = int(np.prod(lead, dtype=np.int64))
+        n = math.prod(lead)  # np.prod of an empty shape costs 4 us
         p_cam = np.empty((n, 3))
         w_R_cam = np.empty((n, 3, 3))
         p_ct = np.empty((n, 3))

@@ -15,6 +15,7 @@ The compiled kernels take the robot's ``kernel_args()`` bundle (``MBCRKernelArgs
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import namedtuple
 from dataclasses import dataclass, field
@@ -213,6 +214,15 @@ def _tip_batch(qs, robot, p, R, J):
 
 
 @njit(cache=True)
+def _tip_single(q, lengths, stiffness, n_insert, p, R, J):
+    # Plain arrays, not the bundle: unboxing a namedtuple argument costs ~0.7 us per call.
+    if not all_finite(q):
+        return False
+    tip_kernel(q, MBCRKernelArgs(lengths, stiffness, n_insert), make_workspace(lengths.shape[0]), p, R, J)
+    return True
+
+
+@njit(cache=True)
 def points_kernel(q, robot, ws, segments, fractions, P, JV):
     """Positions (m, 3) and translational Jacobians (m, 3, dof) of body points, for one q."""
     frames(q, robot, ws)
@@ -280,6 +290,29 @@ def _three_segment_constant(values) -> np.ndarray:
     array = np.array(values)
     array.flags.writeable = False
     return array
+
+
+def _point_spec(n_segments: int, points) -> tuple[np.ndarray, np.ndarray]:
+    points = list(points)
+    if not points:
+        raise ValueError("points must hold at least one (segment, fraction) pair")
+    segments = np.empty(len(points), dtype=np.int64)
+    fractions = np.empty(len(points))
+    for i, pair in enumerate(points):
+        try:
+            segment, value = pair
+        except (TypeError, ValueError):
+            raise ValueError(f"points[{i}] must be a (segment, fraction) pair; got {pair!r}") from None
+        segments[i] = integer(segment, f"points[{i}] segment (0-based)", low=0, high=n_segments - 1)
+        fractions[i] = fraction(value, f"points[{i}] fraction", allow_zero=True)
+    return segments, fractions
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_point_spec(n_segments: int, points: tuple) -> tuple[np.ndarray, np.ndarray]:
+    # Shared arrays, left writeable: a read-only flag is part of a numba array type and would compile
+    # a second specialisation of every kernel they reach. No kernel writes to them.
+    return _point_spec(n_segments, points)
 
 
 @dataclass(frozen=True)
@@ -394,20 +427,17 @@ class MultiBackboneRobot:
         return np.ascontiguousarray(as_array(q, name, (self.dof,)))
 
     def point_spec(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """(segments (m,) int, fractions (m,)) of (segment, arc fraction) pairs; both validated."""
-        points = list(points)
-        if not points:
-            raise ValueError("points must hold at least one (segment, fraction) pair")
-        segments = np.empty(len(points), dtype=np.int64)
-        fractions = np.empty(len(points))
-        for i, pair in enumerate(points):
+        """(segments (m,) int, fractions (m,)) of (segment, arc fraction) pairs; both validated.
+
+        A tuple of pairs (such as ``PAPER_PSPS``) is validated once and its arrays are shared by later
+        calls (the controllers ask for the same points at every step): do not write to them.
+        """
+        if isinstance(points, tuple):
             try:
-                segment, value = pair
-            except (TypeError, ValueError):
-                raise ValueError(f"points[{i}] must be a (segment, fraction) pair; got {pair!r}") from None
-            segments[i] = integer(segment, f"points[{i}] segment (0-based)", low=0, high=self.n_segments - 1)
-            fractions[i] = fraction(value, f"points[{i}] fraction", allow_zero=True)
-        return segments, fractions
+                return _cached_point_spec(self.n_segments, points)
+            except TypeError:  # unhashable entries: validate them below, with the error naming the entry
+                pass
+        return _point_spec(self.n_segments, points)
 
     # ------------------------------------------------------------------ kinematics
     def _flat(self, q):
@@ -418,6 +448,13 @@ class MultiBackboneRobot:
 
     def forward_kinematics_and_jacobian(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(p, R, J) from one kernel call; shapes (..., 3) in m, (..., 3, 3), (..., 6, dof)."""
+        if type(q) is np.ndarray and q.shape == (self.dof,) and q.dtype == np.float64 and q.flags.c_contiguous:
+            # one configuration, already in the kernel's layout: the controllers' per-step call
+            p, R, J = np.empty(3), np.empty((3, 3)), np.empty((6, self.dof))
+            lengths, stiffness = self._arrays
+            if not _tip_single(q, lengths, stiffness, self.n_insert_samples, p, R, J):
+                _raise_not_finite(q)
+            return p, R, J
         q, batch, flat = self._flat(q)
         n = flat.shape[0]
         p = np.empty((n, 3))

@@ -469,3 +469,27 @@ def test_rl_zoo_trains_with_the_shipped_yaml(tmp_path):
                              "--eval-freq", "-1"], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     assert list(tmp_path.glob("ppo/ContinuumGym-ViewTracking-v0_1/*.zip"))
+
+
+@pytest.mark.parametrize("env_id, k", [("ContinuumGym/OcclusionAvoidance-v0", 8), ("ContinuumGym/ViewTracking-v0", 6)])
+def test_the_step_entry_point_and_the_dispatcher_agree(env_id, k):
+    """The core calls its kernel's compiled entry point directly; arrays of another layout take numba's
+    dispatcher instead. Both must step the same rows to the same bits, and a pickled core again."""
+    from continuum_gym.evaluation.rollout import make_core
+
+    rng = np.random.default_rng(0)
+    actions = np.ascontiguousarray(rng.uniform(-1, 1, (3, 4, k))[:, 0, :])  # (3, k) float64, C order
+    cores = [make_core(env_id, 3, task="random") for _ in range(3)]
+    for core in cores:
+        core.reset_rows(np.arange(3), np.arange(3))
+    cores[2] = pickle.loads(pickle.dumps(cores[2]))
+    active = np.ones(3, dtype=np.uint8)
+    strided = np.asfortranarray(actions)  # another layout: the dispatcher path
+    for _ in range(5):
+        cores[0].step(actions.copy(), active)
+        cores[1].step(strided, active.astype(np.uint8))
+        cores[2].step(actions.copy(), active)
+    assert cores[0]._step_call.entry is not None
+    for other in cores[1:]:
+        np.testing.assert_array_equal(cores[0].obs, other.obs)
+        np.testing.assert_array_equal(cores[0].rewards, other.rewards)

@@ -365,3 +365,22 @@ def test_segment_functions_reject_bad_input():
         endoscope_segment_pose(0.1, 0.0, 0.0)
     with pytest.raises(ValueError, match="theta"):
         endoscope_segment_jacobian(np.nan, 0.0, 0.02)
+
+
+def test_the_single_configuration_path_equals_the_batch_path():
+    """One C-contiguous float64 q takes a kernel of its own (no bundle unboxing); same bits as a batch."""
+    from continuum_gym.robots import ContinuumEndoscope
+
+    endo = ContinuumEndoscope()
+    qs = np.random.default_rng(4).uniform(0.1, 1.0, (4, 6))
+    batch = endo.fk_jacobian(qs)
+    for k, q in enumerate(qs):
+        single = endo.fk_jacobian(np.ascontiguousarray(q))
+        for a, b in zip(single, batch):
+            assert np.array_equal(a, b[k])
+        p, R = endo.forward_kinematics(np.ascontiguousarray(q))
+        assert np.array_equal(p, batch[0][k]) and np.array_equal(R, batch[1][k])
+    bad = qs[0].copy()
+    bad[0] = np.inf
+    with pytest.raises(ValueError, match="finite"):
+        endo.fk_jacobian(bad)

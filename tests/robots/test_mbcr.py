@@ -234,3 +234,21 @@ def test_kinematics_accepts_configurations_beyond_any_limit():
     J = ROBOT.jacobian(q)
     assert np.all(np.isfinite(J))
     assert _relative_error(J, fd_twist_jacobian(ROBOT.forward_kinematics, q)) <= 1e-6
+
+
+def test_the_single_configuration_path_equals_the_batch_path():
+    """One C-contiguous float64 q takes a kernel of its own (no bundle unboxing); same bits as a batch."""
+    from continuum_gym.robots import MultiBackboneRobot
+
+    robot = MultiBackboneRobot()
+    qs = np.random.default_rng(3).uniform(-1, 1, (5, 7)) * [1.5, 3, 1.5, 3, 1.5, 3, 0.02]
+    p_batch, R_batch, J_batch = robot.forward_kinematics_and_jacobian(qs)
+    for k, q in enumerate(qs):
+        p, R, J = robot.forward_kinematics_and_jacobian(np.ascontiguousarray(q))
+        assert np.array_equal(p, p_batch[k]) and np.array_equal(R, R_batch[k]) and np.array_equal(J, J_batch[k])
+        p_list, _, _ = robot.forward_kinematics_and_jacobian(list(q))  # not an array: the general path
+        assert np.array_equal(p_list, p)
+    bad = qs[0].copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        robot.forward_kinematics_and_jacobian(bad)
