@@ -26,7 +26,6 @@ from common import finish, machine, print_table  # noqa: E402
 
 import continuum_gym  # noqa: E402
 
-
 #: Unit of every numeric result key (fnmatch patterns over the flattened, dot-joined keys), so that a
 #: comparison across revisions (benchmarks/compare.py) knows which direction is better. "(derived)"
 #: marks differences of separately timed quantities: they are shown, never judged.

@@ -9,7 +9,7 @@
 - ``register_controller(name, rates, env=..., params=())``: a compiled rate function (the signatures
   below) that runs as the residual base inside the compiled step; then ``base_controller=name``.
 - ``register_reward_term(name, fn, env=..., weight=1.0)``: a compiled per-row term or a batched numpy
-  function of the per-step metrics; it is added to the reward (and to ``info["reward_terms"]``) of every
+  function of the per-step metrics; it is added to the reward (and to ``info["reward_terms"][name]``) of every
   env of that id made afterwards, with ``reward_weights={name: w}`` to change or zero its weight.
 
 Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):

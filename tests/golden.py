@@ -54,15 +54,15 @@ ENV_CASES = (
 
 
 def canonical_info(info: dict, prefix: str = "") -> dict:
-    """Flatten an info dict to {name: array}: nested dicts joined by '.', flat ``reward_<term>`` keys
-    renamed to ``reward_terms.<term>``; Gymnasium's ``_<key>`` masks are dropped."""
+    """Flatten an info dict to {name: array}: nested dicts and named ``reward_terms`` joined by '.',
+    flat ``reward_<term>`` keys (older layouts) renamed to ``reward_terms.<term>``; ``_<key>`` masks dropped."""
     out = {}
     for key, value in info.items():
         if key.startswith("_"):
             continue
         name = f"{prefix}{key}"
-        if isinstance(value, dict):
-            out.update(canonical_info(value, f"{name}."))
+        if isinstance(value, dict) or callable(getattr(value, "items", None)):  # dicts, named RewardTerms
+            out.update(canonical_info(dict(value.items()), f"{name}."))
             continue
         if not prefix and key.startswith("reward_") and key != "reward_terms":
             name = f"reward_terms.{key[len('reward_'):]}"

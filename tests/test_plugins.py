@@ -259,8 +259,8 @@ def test_registered_reward_terms_are_added_and_reported(registered):
     venv.reset(seed=0)
     _, rewards, _, _, infos = venv.step(np.zeros((3, 8), dtype=np.float32))
     core = venv.unwrapped.core
-    np.testing.assert_allclose(infos["reward_tip_error_mm"], 0.5 * -1e3 * core.metrics[:, METRIC_TIP_ERROR])
-    np.testing.assert_allclose(infos["reward_voi_squared"], 2.0 * -core.metrics[:, METRIC_VOI] ** 2)
+    np.testing.assert_allclose(infos["reward_terms"]["tip_error_mm"], 0.5 * -1e3 * core.metrics[:, METRIC_TIP_ERROR])
+    np.testing.assert_allclose(infos["reward_terms"]["voi_squared"], 2.0 * -core.metrics[:, METRIC_VOI] ** 2)
     np.testing.assert_allclose(rewards, core.terms.sum(axis=1), rtol=1e-12)
     with pytest.raises(ValueError, match="signature"):
         register_reward_term("bad", njit(lambda metrics: 0.0))

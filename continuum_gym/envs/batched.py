@@ -1,10 +1,8 @@
-"""One batched implementation behind three front ends: ``gymnasium.Env``, ``gymnasium.vector.VectorEnv``
-and stable-baselines3's ``VecEnv``.
+"""The batched core behind three front ends: ``gymnasium.Env`` (``envs/single.py``),
+``gymnasium.vector.VectorEnv`` (``envs/vector.py``) and stable-baselines3's ``VecEnv`` (``envs/sb3.py``).
 
 A *core* (``OcclusionCore``, ``ViewTrackingCore``) holds the state of N robots as arrays and advances
-all of them with one compiled call. The single env is a core of one behind the standard API; the
-vector env is a core of N with Gymnasium 1.x next-step autoreset; the SB3 adapter resets in the same
-step and stores ``terminal_observation`` as SB3 expects.
+all of them with one compiled call.
 """
 
 from __future__ import annotations
@@ -12,14 +10,11 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from gymnasium.utils import seeding
-from gymnasium.vector import AutoresetMode, VectorEnv
 from numba import njit
 
-from continuum_gym.envs.info import info_batch, info_row
+from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, info_row
 from continuum_gym.validation import integer
 
 
@@ -141,6 +136,7 @@ class BatchedCore:
     spec = None
     config_class: type = None
     step_kernel = None  #: the compiled ``*_step_batch`` of the core
+    supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     builtin_reward_names: tuple = ()
     info_fields: tuple = ()
     metric_columns: dict = {}  # info name -> column of ``metrics``, for numpy reward terms
@@ -167,7 +163,7 @@ class BatchedCore:
         return info_batch(self.info_fields, self)
 
     def info_row(self, row: int) -> dict:
-        """Every ``info`` entry of one row: Python scalars and fresh arrays."""
+        """Every ``info`` entry of one row: numpy scalars and fresh arrays."""
         return info_row(self.info_fields, self, row)
 
     def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:  # pragma: no cover - interface
@@ -273,167 +269,26 @@ class BatchedCore:
 
     reward_names: tuple = ()
 
-    def reward_terms(self) -> dict:
-        return {key: self.terms[:, k].copy() for k, key in enumerate(self.reward_names)}
+    def reward_terms(self) -> RewardTerms:
+        """The weighted reward terms of every row: (N, n_terms), readable by term name."""
+        return RewardTerms(self.terms[:, :len(self.reward_names)], self.reward_names)
 
-    def reward_terms_row(self, row: int) -> dict:
-        return dict(zip(self.reward_names, self.terms[row].tolist()))
+    def reward_terms_row(self, row: int) -> RewardTerms:
+        """The weighted reward terms of one row: (n_terms,), readable by term name (numpy scalars)."""
+        return RewardTerms(self.terms[row, :len(self.reward_names)], self.reward_names)
 
     def sample_task_id(self, rng: np.random.Generator) -> int:
         return int(rng.integers(0, self.task_count))
 
+    def check_task_ids(self, task_ids: Any, count: int, name: str) -> np.ndarray:
+        """``count`` task ids as int64: whole numbers in [0, task_count), else a named error."""
+        values = np.asarray(task_ids, dtype=object).reshape(-1) if np.ndim(task_ids) else [task_ids]
+        if len(values) != count:
+            raise ValueError(f"{name} must hold {count} task id(s); got {len(values)}")
+        return np.array([integer(v, name, low=0, high=self.task_count - 1) for v in values], dtype=np.int64)
 
-# ---------------------------------------------------------------------- single env
-class ContinuumEnv(gym.Env):
-    """A core of one behind ``gymnasium.Env`` (subclasses set ``core_class`` and the docstring)."""
-
-    core_class: type = BatchedCore
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
-
-    def __init__(self, render_mode=None, camera="external", pixel_occlusion=False, **kwargs):
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}; got {render_mode!r}")
-        self.render_mode = render_mode
-        self.camera = camera
-        self.core = self.core_class(num_envs=1, **kwargs)
-        self.observation_space = self.core.single_observation_space
-        self.action_space = self.core.single_action_space
-        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
-        self._scene = None
-        self._pixel_occlusion = bool(pixel_occlusion)
-        self._needs_reset = True
-        self._active = np.ones(1, dtype=np.uint8)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        options = options or {}
-        task_id = options.get("task_id")
-        if task_id is None:
-            task_id = self.core.sample_task_id(self.np_random)
-        self.core.reset_rows(np.array([0]), np.array([int(task_id)]))
-        self._needs_reset = False
-        return self.core.obs[0].astype(np.float32), self._info(clipped=False)
-
-    def step(self, action):
-        if self._needs_reset:
-            raise RuntimeError("call reset() before step(): the episode has ended or never started")
-        action, clipped = check_actions(action, self.action_space.shape)
-        rewards, terminated, truncated = self.core.step(action, self._active)
-        self._needs_reset = bool(terminated[0] or truncated[0])
-        return (self.core.obs[0].astype(np.float32), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
-                self._info(clipped=bool(clipped[0])))
-
-    def _info(self, clipped):
-        info = self.core.info_row(0)
-        info["reward_terms"] = self.core.reward_terms_row(0)
-        info["action_clipped"] = clipped
-        if self._pixel_occlusion:
-            info["pixel_occlusion"] = self.core.pixel_occlusion(0, self.scene())
-        return info
-
-    def scene(self):
-        """The pybullet scene that renders this env (built on first use; ``close()`` releases it)."""
-        if self._scene is None:
-            self._scene = self.core.make_scene()
-        return self._scene
-
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
-            return None
-        return self.core.render_row(0, self.scene(), self.camera)
-
-    def close(self):
-        if self._scene is not None:
-            self._scene.close()
-            self._scene = None
-
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state["_scene"] = None  # pybullet clients do not pickle; rebuilt on demand
-        return state
-
-
-# ---------------------------------------------------------------------- native vector env
-def row_generators(seed, num_envs):
-    """One generator per row, seeded like ``SyncVectorEnv``: seed + i, or each of a list."""
-    if seed is None:
-        seeds = [None] * num_envs
-    elif isinstance(seed, (int, np.integer)):
-        seeds = [int(seed) + i for i in range(num_envs)]
-    else:
-        seeds = list(seed)
-        if len(seeds) != num_envs:
-            raise ValueError(f"seed must be an int or a list of {num_envs} ints; got {len(seeds)}")
-    return [seeding.np_random(s)[0] for s in seeds]
-
-
-class ContinuumVectorEnv(VectorEnv):
-    """N robots as arrays, stepped by one compiled call; Gymnasium 1.x next-step autoreset."""
-
-    core_class: type = BatchedCore
-    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25,
-                                "autoreset_mode": AutoresetMode.NEXT_STEP}
-
-    def __init__(self, num_envs: int = 1, max_episode_steps=None, render_mode=None, **kwargs):
-        if int(num_envs) != num_envs or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1; got {num_envs!r}")
-        kwargs.pop("camera", None)
-        kwargs.pop("pixel_occlusion", None)
-        self.num_envs = int(num_envs)
-        self.core = self.core_class(num_envs=self.num_envs, max_episode_steps=max_episode_steps, **kwargs)
-        self.render_mode = render_mode
-        self.single_observation_space = self.core.single_observation_space
-        self.single_action_space = self.core.single_action_space
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
-        self._rngs = row_generators(None, self.num_envs)
-        self._autoreset = np.zeros(self.num_envs, dtype=bool)
-
-    def reset(self, *, seed=None, options=None):
-        if seed is not None or not hasattr(self, "_seeded"):
-            self._rngs = row_generators(seed, self.num_envs)
-            self._seeded = True
-            self.action_space.seed(None if seed is None else int(np.asarray(seed).ravel()[0]))
-        options = options or {}
-        task_ids = options.get("task_ids")
-        if task_ids is None:
-            task_ids = [self.core.sample_task_id(rng) for rng in self._rngs]
-        task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
-        if task_ids.shape != (self.num_envs,):
-            raise ValueError(f"options['task_ids'] must hold {self.num_envs} ids; got shape {task_ids.shape}")
-        self.core.reset_rows(np.arange(self.num_envs), task_ids)
-        self._autoreset[:] = False
-        return self.core.obs.astype(np.float32), self._info(np.zeros(self.num_envs, dtype=bool))
-
-    def step(self, actions):
-        actions, clipped = check_actions(actions, (self.num_envs,) + self.single_action_space.shape, "actions")
-        active = (~self._autoreset).astype(np.uint8)
-        rewards, terminated, truncated = self.core.step(actions, active)
-        rewards = rewards.copy()
-        terminated = terminated.copy()
-        truncated = truncated.copy()
-        resetting = np.flatnonzero(self._autoreset)
-        if len(resetting):
-            ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in resetting])
-            self.core.reset_rows(resetting, ids)
-            rewards[resetting] = 0.0
-            terminated[resetting] = False
-            truncated[resetting] = False
-        self._autoreset = terminated | truncated
-        return self.core.obs.astype(np.float32), rewards, terminated, truncated, self._info(clipped)
-
-    def _info(self, clipped):
-        info = dict(self.core.info())
-        info.update({f"reward_{key}": value for key, value in self.core.reward_terms().items()})
-        info["action_clipped"] = clipped
-        mask = np.ones(self.num_envs, dtype=bool)
-        for key in list(info):
-            info[f"_{key}"] = mask
-        return info
-
-    def render(self):
-        return None
+    def info_fields_doc(self) -> str:
+        return fields_table(self.info_fields)
 
 
 # ---------------------------------------------------------------------- stable-baselines3 adapter

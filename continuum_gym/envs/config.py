@@ -30,6 +30,14 @@ from continuum_gym.validation import (
 )
 
 TASK_SPLITS = ("train", "validation", "test")
+class UnknownArgumentError(TypeError, ValueError):
+    """An env keyword argument that does not exist.
+
+    A ``TypeError`` like Python's own "unexpected keyword argument" (clients such as torchrl probe
+    optional keywords and catch it), and a ``ValueError`` like every other bad input of the library.
+    """
+
+
 #: Task families of each environment (the papers' fixed tasks exist only in the test split).
 OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
 OCCLUSION_TEST_ONLY = ("circle",)
@@ -73,7 +81,7 @@ class EnvConfig:
 
     @classmethod
     def from_kwargs(cls, **kwargs: Any) -> EnvConfig:
-        """Build from the keyword arguments of ``gym.make``; unknown names raise ``ValueError``."""
+        """Build from the keyword arguments of ``gym.make``; an unknown name raises ``UnknownArgumentError``."""
         names = cls.keyword_names()
         for key in list(kwargs):
             if key in cls.foreign_keywords:
@@ -81,8 +89,8 @@ class EnvConfig:
                     raise ValueError(f"{key} applies to another environment, not {cls.env_id}; valid arguments: "
                                      f"{sorted(names)}")
             elif key not in names:
-                raise ValueError(f"{cls.env_id} has no argument {key!r}{closest(key, names)}; valid arguments: "
-                                 f"{sorted(names)}")
+                raise UnknownArgumentError(f"{cls.env_id} got an unexpected keyword argument {key!r}"
+                                           f"{closest(key, names)}; valid arguments: {sorted(names)}")
         return cls(**kwargs)
 
     def replace(self, **changes: Any) -> EnvConfig:
@@ -388,4 +396,4 @@ def _resolve_robot(robot: Any, kind: type, registered: dict):
     return robot
 
 
-__all__ = ["EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]
+__all__ = ["UnknownArgumentError", "EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]

@@ -3,7 +3,8 @@
 A core lists its entries as ``InfoField``s: a name, how to read the (N, ...) batch values from the
 core's arrays, and the Python type of a single row's value (``None``: an array). ``info_batch`` and
 ``info_row`` both come from that one list, so the single env, the vector env and the SB3 adapter
-report the same entries with the same values.
+report the same entries with the same values: numpy arrays (batch) and numpy scalars (one row), and
+the weighted reward terms as one named array ``reward_terms`` (``RewardTerms``).
 """
 
 from __future__ import annotations
@@ -104,16 +105,83 @@ def info_batch(fields: Sequence[InfoField], core) -> dict:
     return {f.name: np.array(f.read(core)) for f in fields}
 
 
+#: A single row's value of each scalar kind: numpy scalars (with a dtype, like the vector env's arrays),
+#: so that clients that read infos as arrays (torchrl, Gymnasium's vector wrappers) take them as they are.
+NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
+
+
 def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
-    """{name: value} of one row: Python scalars for scalar fields, fresh arrays for the others."""
+    """{name: value} of one row: numpy scalars for scalar fields, fresh arrays for the others."""
     out = {}
     for f in fields:
         read_row = getattr(f.read, "row", None)  # one element, not the whole batch's column
         value = read_row(core, row) if read_row is not None else f.read(core)[row]
-        out[f.name] = np.array(value) if f.scalar is None else f.scalar(value)
+        out[f.name] = np.array(value) if f.scalar is None else NUMPY_SCALARS[f.scalar](value)
     return out
 
 
 def fields_table(fields: Sequence[InfoField]) -> str:
     """Markdown list of the entries and their meaning (for the env docstrings)."""
     return "\n".join(f"    - ``{f.name}``: {f.doc}" for f in fields)
+
+
+class RewardTerms(np.ndarray):
+    """The weighted reward terms of a step: a float64 array that also reads like a ``{term: value}`` dict.
+
+    ``info["reward_terms"]["voi"]`` is the weighted VOI term (a numpy scalar for one env, an (N,) array
+    for a vector env), ``keys()`` / ``values()`` / ``items()`` / ``in`` / iteration behave as on a dict
+    keyed by term name, and ``sum(terms.values())`` is the step's reward. It stays a plain numeric array
+    (shape (n_terms,) or (N, n_terms), columns in ``names`` order), so clients that turn every info entry
+    into a tensor (torchrl's info readers) take it as it is; a nested dict would break them.
+    """
+
+    names: tuple[str, ...]
+
+    def __new__(cls, values: np.ndarray, names: Sequence[str]) -> RewardTerms:
+        terms = np.array(values, dtype=np.float64).view(cls)
+        if terms.shape[-1:] != (len(names),):
+            raise ValueError(f"reward terms: last axis must have {len(names)} entries (names {tuple(names)}); "
+                             f"got shape {terms.shape}")
+        terms.names = tuple(names)
+        return terms
+
+    def __array_finalize__(self, source) -> None:
+        self.names = getattr(source, "names", ())
+
+    def __reduce__(self):  # pickles (async vector envs, checkpoints) with its names
+        return RewardTerms, (self.view(np.ndarray), self.names)
+
+    def _column(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no reward term {name!r}; the terms are {self.names}") from None
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            return self.view(np.ndarray)[..., self._column(key)]
+        if self.ndim == 2 and isinstance(key, (int, np.integer)):  # one env's terms of a batch, still named
+            return RewardTerms(self.view(np.ndarray)[key], self.names)
+        return self.view(np.ndarray)[key]
+
+    def __contains__(self, key) -> bool:
+        return key in self.names if isinstance(key, str) else bool(np.ndarray.__contains__(self, key))
+
+    def __iter__(self):
+        return iter(self.names)
+
+    def keys(self) -> tuple[str, ...]:
+        return self.names
+
+    def values(self) -> list:
+        return [self[name] for name in self.names]
+
+    def items(self) -> list:
+        return [(name, self[name]) for name in self.names]
+
+    def get(self, name: str, default: Any = None) -> Any:
+        return self[name] if name in self.names else default
+
+    def as_dict(self) -> dict:
+        """A plain ``{term: value}`` dict (e.g. for JSON)."""
+        return dict(self.items())

@@ -4,17 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import VectorEnv
 
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
     BatchedCore,
-    ContinuumEnv,
-    ContinuumVectorEnv,
     parallel_chunks,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import OcclusionConfig
-from continuum_gym.envs.info import AtMost, InfoField, attribute, bits, column, fields_table
+from continuum_gym.envs.info import (
+    AtMost,
+    InfoField,
+    attribute,
+    bits,
+    column,
+    fields_table,
+)
 from continuum_gym.envs.occlusion_kernel import (
     FLAG_BASE_FROZEN,
     FLAG_BASE_SATURATED,
@@ -39,8 +45,10 @@ from continuum_gym.envs.occlusion_kernel import (
     occlusion_observe_batch,
     occlusion_step_batch,
 )
+from continuum_gym.envs.single import ContinuumEnv
 from continuum_gym.envs.spec import OCCLUSION_SPEC
 from continuum_gym.envs.tasks import VISIBILITY_FRACTION, TaskContext
+from continuum_gym.envs.vector import ContinuumVectorEnv
 
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
 INFO_FIELDS = (
@@ -77,6 +85,7 @@ class OcclusionCore(BatchedCore):
     config_class = OcclusionConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(occlusion_step_batch)
+    supports_pixel_occlusion = True
     info_fields = INFO_FIELDS
     metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
@@ -244,7 +253,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     | 31 | elapsed time | / task duration |
 
     ## Rewards
-    Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"]``):
+    Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``):
     ``voi`` = -w VOI; ``tip_position`` = -w |e_p| / 1 mm; ``tip_orientation`` = -w |e_R| / 0.01 rad;
     ``visibility`` = -w max(0, f - 0.7)/0.3 with f the tip's angle from the view axis over the cone
     half-angle (looking away from the robot is not a way to avoid occlusion); ``action`` = -w mean(a^2).
@@ -260,8 +269,12 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     ``truncated`` at the task's duration (hold 1.5 s, random 5 s, circle 10 s; mixed: its instance's).
 
     ## Info
+    One layout for the single env, the native vector env and the SB3 adapter: numpy scalars
+    (float64, bool_, int64) and arrays in the single env, (N, ...) arrays with Gymnasium's ``_<key>``
+    masks in the vector env.
 {info}
-    - ``reward_terms``: each weighted reward term (the reward is their sum); ``action_clipped``: the
+    - ``reward_terms``: the weighted reward terms, read by name like a dict (``info["reward_terms"]["voi"]``;
+      their sum is the reward) and a float64 array in ``reward_terms.names`` order; ``action_clipped``: the
       action was clipped to [-1, 1].
 
     ## Arguments
@@ -273,7 +286,10 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
 {arguments}
 
     ## Version History
-    - v0: initial release.
+    - v0 (continuum-gym 0.1): initial release. Later in 0.1, with the same dynamics and rewards: robots,
+      tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
+      reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
+      takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
     """.replace("{info}", fields_table(INFO_FIELDS)).replace(
     "{arguments}", "\n".join("    " + line for line in OcclusionConfig.arguments_table().splitlines()))
 
@@ -283,6 +299,7 @@ class OcclusionAvoidanceEnv(ContinuumEnv):
     __doc__ = _DOC
 
 
-class OcclusionAvoidanceVectorEnv(ContinuumVectorEnv):
+class OcclusionAvoidanceVectorEnv(ContinuumVectorEnv, VectorEnv):  # VectorEnv listed: clients such as skrl detect it
+                                                    # among the direct bases
     core_class = OcclusionCore
     __doc__ = "Native batched vector version of OcclusionAvoidance-v0 (one compiled call per step).\n\n    " + _DOC

@@ -8,12 +8,18 @@ this adapter drives the core directly rather than wrapping the Gymnasium vector 
 
 from __future__ import annotations
 
+import inspect
+import time
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from continuum_gym.envs.batched import check_actions, row_generators
+from continuum_gym.envs.batched import check_actions
 from continuum_gym.envs.spec import get_spec, registered_kwargs
+from continuum_gym.envs.vector import row_generators
+from continuum_gym.validation import integer
 
 
 def core_class(env_id: str) -> type:
@@ -24,21 +30,40 @@ def core_class(env_id: str) -> type:
 class ContinuumSB3VecEnv(VecEnv):
     """N environments of ``env_id`` in one process, stepped by one compiled call.
 
+    Each row's ``info`` holds what ``DummyVecEnv`` over ``gym.make(env_id)`` wrapped in SB3's
+    ``Monitor`` would give: the env's info entries (numpy scalars and arrays, ``reward_terms``,
+    ``action_clipped``), and at the end of an episode ``terminal_observation``,
+    ``TimeLimit.truncated`` and ``episode = {"r": return, "l": length, "t": seconds since start}``.
+
     Args:
-        env_id: a ``ContinuumGym/`` id.
-        num_envs: batch size.
+        env_id: a ``ContinuumGym/`` id, or any id registered to the library's entry points (its
+            registered kwargs are the defaults).
+        num_envs: batch size (>= 1).
         seed: row i is seeded with seed + i (as ``SyncVectorEnv``/``DummyVecEnv`` would seed it).
+        render_mode: ``"rgb_array"`` for ``render()``/``get_images()`` (e.g. ``VecVideoRecorder``).
+        camera: the camera those images are taken from.
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
-    def __init__(self, env_id: str, num_envs: int, seed=None, **kwargs):
+    def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
+                 camera: str = "external", **kwargs: Any):
+        from continuum_gym.envs.single import check_render_arguments
+
         self.env_id = env_id
         self.env_kwargs = {**registered_kwargs(env_id), **kwargs}
+        num_envs = integer(num_envs, "num_envs", low=1)
         self.core = core_class(env_id)(num_envs=num_envs, **self.env_kwargs)
-        self.render_mode = None
+        self.render_mode, self.camera, _ = check_render_arguments({"render_modes": ["rgb_array"]}, self.core,
+                                                                  render_mode, camera, False)
         super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
+        self.spec = _gym_spec(env_id)
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._rngs = row_generators(seed, num_envs)
         self._actions = None
+        self._scene = None
+        self._returns = np.zeros(num_envs)
+        self._lengths = np.zeros(num_envs, dtype=np.int64)
+        self._started = time.time()
 
     # ------------------------------------------------------------------ VecEnv API
     def reset(self):
@@ -47,46 +72,73 @@ class ContinuumSB3VecEnv(VecEnv):
             self._reset_seeds()
         ids = np.array([self.core.sample_task_id(rng) for rng in self._rngs])
         self.core.reset_rows(np.arange(self.num_envs), ids)
+        self._returns[:] = 0.0
+        self._lengths[:] = 0
         return self.core.obs.astype(np.float32)
 
     def step_async(self, actions):
+        shape = (self.num_envs,) + self.action_space.shape
+        if np.shape(actions) != shape:  # never reshape: (2, 16) for (4, 8) would scramble the rows
+            raise ValueError(f"actions must have shape {shape} (num_envs, action dim); got {np.shape(actions)}")
         self._actions = actions
 
     def step_wait(self):
-        actions, clipped = check_actions(np.asarray(self._actions).reshape(self.num_envs, -1),
-                                         (self.num_envs,) + self.action_space.shape, "actions")
+        actions, clipped = check_actions(self._actions, (self.num_envs,) + self.action_space.shape, "actions")
         rewards, terminated, truncated = self.core.step(actions, np.ones(self.num_envs, dtype=np.uint8))
+        self._returns += rewards
+        self._lengths += 1
         rewards = rewards.astype(np.float32)
         dones = terminated | truncated
         obs = self.core.obs.astype(np.float32)
-        metrics = self.core.info()
+        batch = dict(self.core.info())
+        batch["reward_terms"] = self.core.reward_terms()
+        batch["action_clipped"] = clipped
         infos = []
         for i in range(self.num_envs):
-            info = {key: value[i] for key, value in metrics.items() if value.ndim == 1}
-            info["action_clipped"] = bool(clipped[i])
+            info = {key: value[i].copy() if value.ndim > 1 else value[i] for key, value in batch.items()}
             if dones[i]:
                 info["terminal_observation"] = obs[i].copy()
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+                info["episode"] = {"r": float(self._returns[i]), "l": int(self._lengths[i]),
+                                   "t": round(time.time() - self._started, 6)}
             infos.append(info)
         finished = np.flatnonzero(dones)
         if len(finished):
             ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in finished])
             self.core.reset_rows(finished, ids)
             obs[finished] = self.core.obs[finished]
+            self._returns[finished] = 0.0
+            self._lengths[finished] = 0
         return obs, rewards, dones, infos
 
     def close(self):
-        pass
+        if self._scene is not None:
+            self._scene.close()
+            self._scene = None
 
     def get_attr(self, attr_name, indices=None):
         owner = self.core if hasattr(self.core, attr_name) else self
         return [getattr(owner, attr_name) for _ in self._indices(indices)]
 
     def set_attr(self, attr_name, value, indices=None):
+        """Set an attribute of the core; its rows share it, so ``indices`` must select every row."""
+        if sorted(self._indices(indices)) != list(range(self.num_envs)):
+            raise ValueError(f"set_attr({attr_name!r}): the {self.num_envs} rows share one batched core, so the "
+                             f"attribute can only be set for all of them (indices=None); got indices={indices!r}")
         setattr(self.core, attr_name, value)
 
     def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
-        return [getattr(self.core, method_name)(*method_args, **method_kwargs) for _ in self._indices(indices)]
+        """Call a core method: per row (its first parameter is ``row``) or once for all rows."""
+        method = getattr(self.core, method_name)
+        rows = list(self._indices(indices))
+        parameters = list(inspect.signature(method).parameters)
+        if parameters and parameters[0] == "row":
+            return [method(row, *method_args, **method_kwargs) for row in rows]
+        if sorted(rows) != list(range(self.num_envs)):
+            raise ValueError(f"env_method({method_name!r}) acts on the shared batched core: call it for all rows "
+                             f"(indices=None); got indices={indices!r}")
+        result = method(*method_args, **method_kwargs)
+        return [result for _ in rows]
 
     def env_is_wrapped(self, wrapper_class, indices=None):
         return [False for _ in self._indices(indices)]
@@ -94,12 +146,24 @@ class ContinuumSB3VecEnv(VecEnv):
     def _indices(self, indices):
         if indices is None:
             return range(self.num_envs)
-        if isinstance(indices, int):
-            return [indices]
-        return indices
+        rows = [indices] if isinstance(indices, (int, np.integer)) else list(indices)
+        for row in rows:
+            integer(row, "indices", low=0, high=self.num_envs - 1)
+        return [int(row) for row in rows]
 
     def get_images(self):
-        return [None] * self.num_envs
+        """One RGB image per row (``render_mode="rgb_array"``), else Nones."""
+        if self.render_mode is None:
+            return [None] * self.num_envs
+        if self._scene is None:
+            self._scene = self.core.make_scene()
+        return [self.core.render_row(row, self._scene, self.camera) for row in range(self.num_envs)]
+
+
+def _gym_spec(env_id: str):
+    from gymnasium.envs.registration import registry
+
+    return registry.get(env_id)
 
 
 def make_env(env_id: str, **kwargs) -> gym.Env:

@@ -79,7 +79,7 @@ class EnvSpec:
     core: str  #: "module:Class" of the batched core
     entry_point: str
     vector_entry_point: str
-    max_episode_steps: int  #: registered bound: the longest task's duration at the default control_dt
+    max_episode_steps: int  #: the longest built-in task's duration at the default control_dt (not registered)
     baselines: tuple[str, ...]  #: analytic controllers that can be the residual base (table order)
     headline_baseline: str  #: the default base: the headline residual is trained on it and compared with it
     headline_metric: str  #: the held-out metric a training run is judged by

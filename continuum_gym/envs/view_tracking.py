@@ -6,19 +6,20 @@ import math
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import VectorEnv
 
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
     BatchedCore,
-    ContinuumEnv,
-    ContinuumVectorEnv,
     parallel_chunks,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import ViewTrackingConfig
 from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
+from continuum_gym.envs.single import ContinuumEnv
 from continuum_gym.envs.spec import VIEW_SPEC
 from continuum_gym.envs.tasks import TaskContext
+from continuum_gym.envs.vector import ContinuumVectorEnv
 from continuum_gym.envs.view_kernel import (
     ACTION_DIM,
     FLAG_CLAMPED,
@@ -221,7 +222,7 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     | 25-26 | sin, cos of the da Vinci roll (only with ``observe_target``) | - |
 
     ## Rewards
-    Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"]``): ``overlap`` = +w OR;
+    Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``): ``overlap`` = +w OR;
     ``position`` = -w eps_p / 0.01 m; ``orientation`` = -w eps_R (rad); ``action`` = -w mean(a^2);
     ``overlap_bonus`` = +w when OR > 0.8 (the coverage map's criterion).
     Defaults: overlap 1.0, position 0.1, orientation 0.1, action 0.01, overlap_bonus 0.
@@ -234,8 +235,12 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     paper's T_max); ``terminated`` only if the state becomes non-finite.
 
     ## Info
+    One layout for the single env, the native vector env and the SB3 adapter: numpy scalars
+    (float64, bool_, int64) and arrays in the single env, (N, ...) arrays with Gymnasium's ``_<key>``
+    masks in the vector env.
 {info}
-    - ``reward_terms``: each weighted reward term (the reward is their sum); ``action_clipped``: the
+    - ``reward_terms``: the weighted reward terms, read by name like a dict (``info["reward_terms"]["voi"]``;
+      their sum is the reward) and a float64 array in ``reward_terms.names`` order; ``action_clipped``: the
       action was clipped to [-1, 1].
 
     ## Arguments
@@ -249,7 +254,10 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
 {arguments}
 
     ## Version History
-    - v0: initial release.
+    - v0 (continuum-gym 0.1): initial release. Later in 0.1, with the same dynamics and rewards: robots,
+      tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
+      reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
+      takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
     """.replace("{info}", fields_table(INFO_FIELDS)).replace(
     "{arguments}", "\n".join("    " + line for line in ViewTrackingConfig.arguments_table().splitlines()))
 
@@ -259,6 +267,7 @@ class ViewTrackingEnv(ContinuumEnv):
     __doc__ = _DOC
 
 
-class ViewTrackingVectorEnv(ContinuumVectorEnv):
+class ViewTrackingVectorEnv(ContinuumVectorEnv, VectorEnv):  # VectorEnv listed: clients such as skrl detect it
+                                                    # among the direct bases
     core_class = ViewTrackingCore
     __doc__ = "Native batched vector version of ViewTracking-v0 (one compiled call per step).\n\n    " + _DOC

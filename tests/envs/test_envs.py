@@ -30,7 +30,7 @@ def test_registry_lists_every_id():
     for env_id in continuum_gym.ENV_IDS:
         spec = gym.spec(env_id)
         assert isinstance(spec.entry_point, str) and isinstance(spec.vector_entry_point, str)
-        assert spec.max_episode_steps is not None
+        assert spec.max_episode_steps is None  # every task truncates itself at its own duration
 
 
 @pytest.mark.parametrize("env_id", continuum_gym.ENV_IDS)
@@ -493,3 +493,26 @@ def test_the_step_entry_point_and_the_dispatcher_agree(env_id, k):
     for other in cores[1:]:
         np.testing.assert_array_equal(cores[0].obs, other.obs)
         np.testing.assert_array_equal(cores[0].rewards, other.rewards)
+
+
+def test_episodes_last_their_tasks_duration_with_no_registered_cut():
+    """No TimeLimit: a 15 s recording at control_dt 5 ms runs its 3000 steps, and says so up front."""
+    from continuum_gym.envs import TipTrajectory
+    from continuum_gym.robots import MultiBackboneRobot
+
+    robot = MultiBackboneRobot()
+    p0, R0 = robot.forward_kinematics(robot.psi_a)
+    t = np.linspace(0.0, 15.0, 4)
+    recording = TipTrajectory(t, np.broadcast_to(p0, (4, 3)), np.broadcast_to(R0, (4, 3, 3)), start_q=robot.psi_a)
+    env = gym.make(OCCLUSION, task=recording, control_dt=0.005, substeps=5)
+    env.reset(seed=0)
+    assert env.unwrapped.episode_steps == 3000
+    steps, done = 0, False
+    while not done:
+        _, _, terminated, truncated, _ = env.step(np.zeros(8, dtype=np.float32))
+        steps += 1
+        done = terminated or truncated
+    assert steps == 3000 and truncated and not terminated
+    short = gym.make(OCCLUSION, task="hold")
+    short.reset(seed=0)
+    assert short.unwrapped.episode_steps == 150

@@ -1,0 +1,117 @@
+"""A batched core of one behind ``gymnasium.Env``.
+
+``info`` has the same entries as the native vector env's, one row of them: numpy scalars (float64,
+bool_, int64) and arrays, the weighted reward terms as one named array ``reward_terms`` (their sum is
+the reward), and ``action_clipped``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.validation import boolean, choice
+
+#: Keys ``reset(options=...)`` understands.
+RESET_OPTIONS = ("task_id",)
+
+
+def check_reset_options(options: Any, valid: tuple) -> dict:
+    """``options`` as a dict whose keys are all in ``valid``; a named error otherwise."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"options must be a dict with keys from {list(valid)}; got {type(options).__name__}")
+    unknown = sorted(set(options) - set(valid))
+    if unknown:
+        raise ValueError(f"options has unknown key(s) {unknown}; valid keys: {list(valid)}")
+    return options
+
+
+def check_render_arguments(metadata: dict, core: BatchedCore, render_mode: Any, camera: Any,
+                           pixel_occlusion: Any) -> tuple:
+    """(render_mode, camera, pixel_occlusion) checked against the env's render modes and cameras."""
+    if render_mode is not None:
+        choice(render_mode, metadata["render_modes"], "render_mode")
+    choice(camera, core.spec.cameras, "camera")
+    pixel_occlusion = boolean(pixel_occlusion, "pixel_occlusion")
+    if pixel_occlusion and not core.supports_pixel_occlusion:
+        raise ValueError(f"pixel_occlusion=True applies to environments with a view cone to occlude "
+                         f"(OcclusionAvoidance), not to {core.spec.env_id}")
+    return render_mode, camera, pixel_occlusion
+
+
+class ContinuumEnv(gym.Env):
+    """A core of one behind ``gymnasium.Env`` (subclasses set ``core_class`` and the docstring)."""
+
+    core_class: type = BatchedCore
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
+                 **kwargs: Any):
+        self.core = self.core_class(num_envs=1, **kwargs)
+        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
+            self.metadata, self.core, render_mode, camera, pixel_occlusion)
+        self.observation_space = self.core.single_observation_space
+        self.action_space = self.core.single_action_space
+        self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
+        self._scene = None
+        self._needs_reset = True
+        self._active = np.ones(1, dtype=np.uint8)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        options = check_reset_options(options, RESET_OPTIONS)
+        task_id = options.get("task_id")
+        if task_id is None:
+            task_id = self.core.sample_task_id(self.np_random)
+        self.core.reset_rows(np.array([0]), self.core.check_task_ids(task_id, 1, "options['task_id']"))
+        self._needs_reset = False
+        return self.core.obs[0].astype(np.float32), self._info(clipped=False)
+
+    def step(self, action):
+        if self._needs_reset:
+            raise gym.error.ResetNeeded("call reset() before step(): the episode has ended or never started")
+        action, clipped = check_actions(action, self.action_space.shape)
+        rewards, terminated, truncated = self.core.step(action, self._active)
+        self._needs_reset = bool(terminated[0] or truncated[0])
+        return (self.core.obs[0].astype(np.float32), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
+                self._info(clipped=bool(clipped[0])))
+
+    @property
+    def episode_steps(self) -> int:
+        """Control steps the current episode lasts unless it terminates earlier (its task's duration)."""
+        return int(self.core.limit[0])
+
+    def _info(self, clipped: bool) -> dict:
+        info = self.core.info_row(0)
+        info["reward_terms"] = self.core.reward_terms_row(0)
+        info["action_clipped"] = np.bool_(clipped)
+        if self._pixel_occlusion:
+            info["pixel_occlusion"] = np.float64(self.core.pixel_occlusion(0, self.scene()))
+        return info
+
+    def scene(self):
+        """The pybullet scene that renders this env (built on first use; ``close()`` releases it)."""
+        if self._scene is None:
+            self._scene = self.core.make_scene()
+        return self._scene
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
+            return None
+        return self.core.render_row(0, self.scene(), self.camera)
+
+    def close(self):
+        if self._scene is not None:
+            self._scene.close()
+            self._scene = None
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_scene"] = None  # pybullet clients do not pickle; rebuilt on demand
+        return state
