@@ -18,6 +18,7 @@ SUBCOMMANDS = {
     "optimum": ("continuum_gym.evaluation.optimum", "offline optima and strong references (the ceiling)"),
     "render": ("continuum_gym.render.record", "record an episode: external and endoscope views"),
     "sweep": ("continuum_gym.agents.sweep", "multi-seed training and sweeps on Ray Tune"),
+    "dataset": ("continuum_gym.evaluation.datasets", "record the baselines' episodes as Minari datasets (offline RL)"),
 }
 
 
