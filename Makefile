@@ -42,5 +42,10 @@ test-fast: setup-test
 bench: setup-test
 	$(BIN)/python benchmarks/kinematics.py --json results/bench/kinematics.json
 
+# The docs site (MkDocs Material): HTML in build/docs, every warning an error (also run by the tests).
+docs: setup
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) results
+	rm -rf $(VENV) results build

@@ -14,7 +14,7 @@ BLOCK = re.compile(r"^```python\n(.*?)^```", re.S | re.M)
 
 def test_the_tutorials_exist_and_hold_examples():
     names = {page.name for page in PAGES}
-    assert {"extend.md", "evaluate.md"} <= names
+    assert {"extend.md", "evaluate.md", "train.md", "read-results.md"} <= names
     for page in PAGES[1:]:
         assert BLOCK.findall(page.read_text()), f"{page.name} has no python example"
 

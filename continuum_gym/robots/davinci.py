@@ -22,6 +22,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from continuum_gym.validation import (
     angle_in_open_interval,
@@ -181,7 +182,7 @@ class DaVinciEndoscope:
         return {"straight": self.straight, "home": self.home, "case1": self.case1, "case2": self.case2}
 
     # -- kinematics ----------------------------------------------------------------------------
-    def stem_rotation(self, q) -> np.ndarray:
+    def stem_rotation(self, q: ArrayLike) -> np.ndarray:
         """``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)`` (..., 3, 3) (eqs 1, 2: w_R_dV1 dV1_R_dV2 dV2_R_dV3)."""
         q = as_configuration(q, DOF)
         flat = np.ascontiguousarray(q.reshape(-1, DOF))
@@ -189,7 +190,7 @@ class DaVinciEndoscope:
         _stem_batch(flat, out)
         return out.reshape(q.shape[:-1] + (3, 3))
 
-    def _poses(self, q):
+    def _poses(self, q: ArrayLike):
         q = as_configuration(q, DOF)
         flat = np.ascontiguousarray(q.reshape(-1, DOF))
         n = flat.shape[0]
@@ -198,7 +199,7 @@ class DaVinciEndoscope:
         lead = q.shape[:-1]
         return p_cam.reshape(lead + (3,)), w_R_cam.reshape(lead + (3, 3)), p_t.reshape(lead + (3,))
 
-    def forward_kinematics(self, q):
+    def forward_kinematics(self, q: ArrayLike):
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
         ``p = R3 [0, 0, L_dV]`` (the stem tip, eq 2 first term); ``R = R3 Rx(-alpha)`` (eq 1 corrected,
@@ -207,7 +208,7 @@ class DaVinciEndoscope:
         p_cam, w_R_cam, _ = self._poses(q)
         return p_cam, w_R_cam
 
-    def target_pose(self, q):
+    def target_pose(self, q: ArrayLike):
         """Visual target frame the continuum endoscope must reach: ``(w_p_dVt (..., 3) in m, w_R_dVt)``.
 
         ``w_p_dVt = cam + R3 Le [0, sin alpha, cos alpha]`` (eq 2), ``w_R_dVt = R3 Rx(-alpha)`` (eq 1
@@ -216,7 +217,7 @@ class DaVinciEndoscope:
         _, w_R_cam, p_t = self._poses(q)
         return p_t, w_R_cam
 
-    def target_point(self, q):
+    def target_point(self, q: ArrayLike):
         """Visual target point ``w_p_dVt`` (..., 3) in m (eq 2)."""
         return self._poses(q)[2]
 

@@ -24,6 +24,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from continuum_gym.robots.segment import (  # noqa: F401  (the segment functions are public here too)
     SERIES_SWITCH,
@@ -425,7 +426,7 @@ class ContinuumEndoscope:
         return {"straight": self.straight, "home": self.home, "case_study_start": self.case_study_start}
 
     # -- kinematics ----------------------------------------------------------------------------
-    def _run(self, q, with_jacobian):
+    def _run(self, q: ArrayLike, with_jacobian):
         """reshape -> kernel -> reshape: ``(p_cam, w_R_cam, p_ct, J or None)`` with q's leading shape."""
         if type(q) is np.ndarray and q.shape == (DOF,) and q.dtype == np.float64 and q.flags.c_contiguous:
             # one configuration, already in the kernel's layout: the controllers' per-step call
@@ -454,7 +455,7 @@ class ContinuumEndoscope:
         return (p_cam.reshape(lead + (3,)), w_R_cam.reshape(lead + (3, 3)), p_ct.reshape(lead + (3,)),
                 J.reshape(lead + (6, 6)) if with_jacobian else None)
 
-    def forward_kinematics(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def forward_kinematics(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
         Eqs (3), (4), (7), (8) with paper-notes §2.2 and §2.3 item 2. The camera sits ``Lc`` along z_2e
@@ -463,16 +464,16 @@ class ContinuumEndoscope:
         p_cam, w_R_cam, _, _ = self._run(q, False)
         return p_cam, w_R_cam
 
-    def target_point(self, q) -> np.ndarray:
+    def target_point(self, q: ArrayLike) -> np.ndarray:
         """Visual target point ct, ``Lc + Le`` along z_2e from the end of segment 2: (..., 3) in m (eq 8)."""
         return self._run(q, False)[2]
 
-    def target_pose(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def target_pose(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """``(w_p_ct (..., 3) in m, w_R_ct (..., 3, 3))`` (eqs 7 and 8 with paper-notes §2.2 / §2.3 item 2)."""
         _, w_R_ct, p_ct, _ = self._run(q, False)
         return p_ct, w_R_ct
 
-    def jacobian(self, q) -> np.ndarray:
+    def jacobian(self, q: ArrayLike) -> np.ndarray:
         """Twist Jacobian of the target point ct in {w}: (..., 6, 6).
 
         Eq (9) corrected per paper-notes §2.2 and §2.3 item 3.
@@ -483,11 +484,11 @@ class ContinuumEndoscope:
         """
         return self._run(q, True)[3]
 
-    def fk_jacobian(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def fk_jacobian(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Everything in one kernel call: ``(p_cam (m), R, p_ct (m), J)`` as in the methods above."""
         return self._run(q, True)
 
-    def backbone(self, q, n_per_segment: int = 20) -> np.ndarray:
+    def backbone(self, q: ArrayLike, n_per_segment: int = 20) -> np.ndarray:
         """Sampled centre line for drawing: (..., 2 * n_per_segment + 4, 3) in m.
 
         Points: base origin (0, 0, 0); {1b} at [0, 0, L0]; ``n_per_segment`` points along segment 1

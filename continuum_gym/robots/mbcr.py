@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from continuum_gym.robots.segment import (
     segment_jacobian,
@@ -422,7 +423,7 @@ class MultiBackboneRobot:
         lengths, stiffness = self._arrays
         return MBCRKernelArgs(lengths, stiffness, int(self.n_insert_samples))
 
-    def as_configuration(self, q, name: str = "q") -> np.ndarray:
+    def as_configuration(self, q: ArrayLike, name: str = "q") -> np.ndarray:
         """``q`` as a float64, C-contiguous (..., dof) array (finiteness is checked in the kernels)."""
         return np.ascontiguousarray(as_array(q, name, (self.dof,)))
 
@@ -440,13 +441,13 @@ class MultiBackboneRobot:
         return _point_spec(self.n_segments, points)
 
     # ------------------------------------------------------------------ kinematics
-    def _flat(self, q):
+    def _flat(self, q: ArrayLike):
         q = self.as_configuration(q)
         if q.ndim == 0:
             raise ValueError(f"q must have shape (..., {self.dof}); got a scalar")
         return q, q.shape[:-1], q.reshape(-1, self.dof)
 
-    def forward_kinematics_and_jacobian(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def forward_kinematics_and_jacobian(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(p, R, J) from one kernel call; shapes (..., 3) in m, (..., 3, 3), (..., 6, dof)."""
         if type(q) is np.ndarray and q.shape == (self.dof,) and q.dtype == np.float64 and q.flags.c_contiguous:
             # one configuration, already in the kernel's layout: the controllers' per-step call
@@ -464,7 +465,7 @@ class MultiBackboneRobot:
             _raise_not_finite(q)
         return p.reshape(batch + (3,)), R.reshape(batch + (3, 3)), J.reshape(batch + (6, self.dof))
 
-    def forward_kinematics(self, q) -> tuple[np.ndarray, np.ndarray]:
+    def forward_kinematics(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Tip pose in {w}: eqs (5)-(8) corrected (paper-notes §1.2, §1.3 items 2-3).
 
         Args:
@@ -476,14 +477,14 @@ class MultiBackboneRobot:
         p, R, _ = self.forward_kinematics_and_jacobian(q)
         return p, R
 
-    def jacobian(self, q) -> np.ndarray:
+    def jacobian(self, q: ArrayLike) -> np.ndarray:
         """6 x dof Jacobian of the tip twist [v; w] in {w} (eq 2, eq 4 corrected per paper-notes §1.3 item 1).
 
         v is the velocity of the tip point (m/s per rad/s, and per m/s for q_ins). Shape (..., 6, dof).
         """
         return self.forward_kinematics_and_jacobian(q)[2]
 
-    def point_jacobian(self, q, segment: int, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    def point_jacobian(self, q: ArrayLike, segment: int, fraction: float) -> tuple[np.ndarray, np.ndarray]:
         """Position (..., 3) in m and translational Jacobian (..., 3, dof) of one backbone point (eq 11).
 
         Args:
@@ -494,7 +495,7 @@ class MultiBackboneRobot:
         P, JV = self.points_jacobians(q, [(segment, fraction)])
         return P[..., 0, :], JV[..., 0, :, :]
 
-    def points_jacobians(self, q, points=PAPER_PSPS) -> tuple[np.ndarray, np.ndarray]:
+    def points_jacobians(self, q: ArrayLike, points=PAPER_PSPS) -> tuple[np.ndarray, np.ndarray]:
         """Positions (..., m, 3) in m and Jacobians (..., m, 3, dof) of body points (segment, fraction)."""
         segments, fractions = self.point_spec(points)
         q, batch, flat = self._flat(q)
@@ -505,7 +506,7 @@ class MultiBackboneRobot:
             _raise_not_finite(q)
         return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, self.dof))
 
-    def backbone(self, q, n_per_segment: int = 40) -> np.ndarray:
+    def backbone(self, q: ArrayLike, n_per_segment: int = 40) -> np.ndarray:
         """Sampled backbone from the channel exit, as paper-notes §1.3 item 13 samples it for VOI.
 
         The straight inserted part from the origin toward [0, 0, q_ins] (``n_insert_samples`` samples),
@@ -527,19 +528,19 @@ class MultiBackboneRobot:
         unless given."""
         return self._arrays[1]
 
-    def elastic_energy(self, q) -> np.ndarray:
+    def elastic_energy(self, q: ArrayLike) -> np.ndarray:
         """Elastic energy E = sum K_i/2 (pi/2 - theta_i)^2 (eq 10 with l_ij = l_i), in J; shape q.shape[:-1]."""
         bend = self.bend_angles(q)
         return 0.5 * np.sum(self.stiffness * bend**2, axis=-1)
 
-    def elastic_energy_gradient(self, q) -> np.ndarray:
+    def elastic_energy_gradient(self, q: ArrayLike) -> np.ndarray:
         """dE/dq, shape (..., dof): theta entries -K_i (pi/2 - theta_i), others 0 (paper-notes §1.3 item 9)."""
         q = as_configuration(q, self.dof)
         grad = np.zeros_like(q)
         grad[..., 0:-1:2] = -self.stiffness * (HALF_PI - q[..., 0:-1:2])
         return grad
 
-    def bend_angles(self, q) -> np.ndarray:
+    def bend_angles(self, q: ArrayLike) -> np.ndarray:
         """Bend angles pi/2 - theta_j (rad) of the segments, shape (..., n); 0 is straight."""
         q = as_configuration(q, self.dof)
         return HALF_PI - q[..., 0:-1:2]
