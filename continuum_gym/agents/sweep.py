@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from continuum_gym.agents.run_inputs import output_directory, seed_number, whole_number
 from continuum_gym.agents.train import (
     ALGOS,
     headline_metric,
@@ -42,6 +43,7 @@ from continuum_gym.agents.train import (
 from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
 from continuum_gym.evaluation.statistics import summarize
+from continuum_gym.validation import number
 
 INSTALL_HINT = "Ray Tune is an optional extra: pip install 'continuum-gym[sweep]' (or pip install 'ray[tune]')"
 SPACE_KINDS = ("grid", "choice", "uniform", "loguniform")
@@ -52,6 +54,8 @@ TRAINER_KEYS = ("residual_scale", "burn_in_steps", "n_envs", "n_timesteps", "nor
 
 def load_search(path, algo: str, env_id: str) -> dict:
     """Parse and validate a search-space YAML; unknown keys raise ``ValueError`` naming them."""
+    if not Path(path).is_file():
+        raise ValueError(f"--search must be a search-space YAML file; {str(path)!r} does not exist")
     spec = yaml.safe_load(Path(path).read_text()) or {}
     unknown = set(spec) - set(SEARCH_KEYS)
     if unknown:
@@ -133,10 +137,29 @@ def _trainable(env_id, algo, base, steps, out, hp_file):
     return trainable
 
 
+def check_sweep_arguments(seeds, steps, cpus_per_trial, search, out) -> tuple[list[int], int | None, float]:
+    """(seeds, steps, cpus_per_trial) validated; the search file and ``out`` checked, else ``ValueError``."""
+    if not isinstance(seeds, (list, tuple)) or not seeds:
+        raise ValueError(f"seeds must be a non-empty list of whole numbers >= 0; got {seeds!r}")
+    seeds = [seed_number("seeds", seed) for seed in seeds]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct; got {seeds}")
+    steps = None if steps is None else whole_number("steps", steps)
+    cpus = number(cpus_per_trial, "cpus_per_trial", low=0.0, high=1024.0, low_open=True)
+    if search is not None and not Path(search).is_file():
+        raise ValueError(f"search must be a search-space YAML file; {str(search)!r} does not exist")
+    output_directory("out", out)
+    return seeds, steps, cpus
+
+
 def sweep(env_id, algo, base, seeds, steps=None, search=None, address=None, cpus_per_trial=1, out="sweeps",
           resume=False, name=None, hyperparams=None, max_failures=2) -> dict:
-    """Run the sweep; returns the results summary (also written to ``<out>/<name>/``)."""
+    """Run the sweep; returns the results summary (also written to ``<out>/<name>/``).
+
+    Every argument is checked before Ray starts: ``ValueError`` naming the parameter and its range.
+    """
     validate(env_id, algo, base)
+    seeds, steps, cpus_per_trial = check_sweep_arguments(seeds, steps, cpus_per_trial, search, out)
     search_spec = load_search(search, algo, env_id) if search else {"method": "grid", "num_samples": 1,
                                                                      "scheduler": "none", "asha": {}, "space": {}}
     try:
@@ -242,7 +265,7 @@ def run(args) -> int:
         sweep(args.env, args.algo, base, args.seeds, steps=args.steps, search=args.search, address=args.address,
               cpus_per_trial=args.cpus_per_trial, out=args.out, resume=args.resume, name=args.name,
               hyperparams=args.hyperparams)
-    except (ValueError, FileExistsError, RuntimeError) as error:
+    except (ValueError, FileExistsError, FileNotFoundError, RuntimeError) as error:
         print(f"continuum-gym sweep: {error}", file=sys.stderr)
         return 2
     return 0

@@ -200,7 +200,7 @@ def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
                                       unit="s"))
     set_(config, "substeps", integer(config.substeps, "substeps", low=1, high=MAX_SUBSTEPS))
     if config.max_episode_steps is not None:
-        set_(config, "max_episode_steps", integer(config.max_episode_steps, "max_episode_steps", low=1))
+        set_(config, "max_episode_steps", integer(config.max_episode_steps, "max_episode_steps", low=1, high=10**9))
 
 
 @dataclass(frozen=True)

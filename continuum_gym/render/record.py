@@ -73,6 +73,7 @@ def run(args) -> int:
         size = integer(args.size, "--size (pixels)", low=16, high=2048)
         every = integer(args.every, "--every", low=1)
         steps = None if args.steps is None else integer(args.steps, "--steps", low=1)
+        seed = integer(args.seed, "--seed", low=0, high=2**32 - 1)
         model, env_kwargs = _resolve_policy(args.policy, spec)
     except (ValueError, FileNotFoundError) as error:
         print(f"continuum-gym render: {error}", file=sys.stderr)
@@ -81,9 +82,13 @@ def run(args) -> int:
     import imageio.v2 as imageio
     from tqdm.auto import tqdm
 
-    env = gym.make(args.env, task=args.task or spec.record_task, task_split="test", render_mode="rgb_array",
-                   **env_kwargs)
-    env.reset(seed=args.seed)
+    try:
+        env = gym.make(args.env, task=args.task or spec.record_task, task_split="test", render_mode="rgb_array",
+                       **env_kwargs)
+    except ValueError as error:  # --task, or a policy's env kwargs, refused by the env
+        print(f"continuum-gym render: --task / policy env kwargs: {error}", file=sys.stderr)
+        return 2
+    env.reset(seed=seed)
     core = env.unwrapped.core
     scene = env.unwrapped.scene()
     history, frames = [], []

@@ -69,6 +69,7 @@ def run(args) -> int:
         n_starts = integer(args.n_starts, "--n-starts", low=1)
         integer(args.global_check, "--global-check", low=0)
         integer(args.env_hold_tasks, "--env-hold-tasks", low=1)
+        integer(args.seed, "--seed (hold-start seed)", low=0, high=2**32 - 1)
     except ValueError as error:
         print(f"continuum-gym optimum: error: {error}", file=sys.stderr)
         return 2
