@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -111,3 +112,56 @@ def test_killed_trial_resumes_from_its_checkpoint(tmp_path, files):
     assert final >= 2048 and (run_dir / "model.zip").exists()
     curve = np.load(run_dir / "evaluations.npz")
     assert curve["timesteps"][-1] == final
+
+
+def _ray_trial_workers() -> list[int]:
+    """Pids of Ray worker processes running a trial (their title is ``ray::ImplicitFunc...``)."""
+    from pathlib import Path
+
+    pids = []
+    for proc in Path("/proc").iterdir():
+        if proc.name.isdigit():
+            try:
+                title = (proc / "cmdline").read_bytes().split(b"\0")[0]
+            except OSError:
+                continue
+            if title.startswith(b"ray::ImplicitFunc"):
+                pids.append(int(proc.name))
+    return pids
+
+
+@pytest.mark.slow
+def test_a_sweep_whose_trial_worker_is_killed_resumes_the_trial_from_its_checkpoint(tmp_path, files):
+    """Ray's FailureConfig path: SIGKILL the trial's worker process mid-training; Tune restarts the
+    trial, which resumes from its newest checkpoint unit and finishes; the sweep exits 0."""
+    from continuum_gym.agents.checkpoint import find_resumable
+
+    hp, _ = files
+    out = tmp_path / "sweeps"
+    sweep = subprocess.Popen([sys.executable, "-m", "continuum_gym.cli", "sweep", "--env", VIEW, "--seeds", "0",
+                              "--hyperparams", str(hp), "--out", str(out), "--name", "k", "--steps", "2048"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    folder = None
+    while time.time() < deadline and sweep.poll() is None:
+        runs = list((out / "k" / "trials").glob("*/ViewTracking_ppo_dimension_reduced_seed0"))
+        if runs and find_resumable(runs[0] / "checkpoints")[0] is not None:
+            folder = runs[0]
+            break
+        time.sleep(0.2)
+    assert folder is not None, "the trial never wrote a checkpoint"
+    workers = _ray_trial_workers()
+    assert workers, "no Ray trial worker found"
+    killed_at = find_resumable(folder / "checkpoints")[0].step
+    for pid in workers:
+        os.kill(pid, signal.SIGKILL)
+    _, stderr = sweep.communicate(timeout=600)
+    assert sweep.returncode == 0, stderr[-3000:]
+    summary = json.loads((out / "k" / "sweep_results.json").read_text())
+    (trial,) = summary["trials"]
+    assert trial["error"] is None and trial["timesteps"] >= 2048
+    assert killed_at < 2048
+    start = yaml.safe_load((folder / "args.yml").read_text())["start"]
+    assert start.startswith("resume from step") and int(start.split()[-1]) >= killed_at
+    timesteps = np.load(folder / "evaluations.npz")["timesteps"].tolist()
+    assert all(a < b for a, b in zip(timesteps, timesteps[1:])) and timesteps[-1] == 2048
