@@ -42,26 +42,41 @@ class MethodRun:
 
     policy: Any
     env_kwargs: dict
+    source: str | None = None  #: the policy's file or entry point (named when it fails)
 
 
-def discover_policies(directory) -> dict:
-    """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``."""
+def discover_policies(directory, skipped: dict | None = None) -> dict:
+    """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``.
+
+    A run whose ``config.yml`` is unreadable, names no env or has no ``model.zip`` beside it is reported
+    on stderr and in ``skipped`` ({run: reason}); the other runs are still found. A directory that holds
+    no run at all is a warning: only the baselines (and ``--policy``) are evaluated then.
+    """
     import yaml
 
     found: dict = {}
+    skipped = {} if skipped is None else skipped
     directory = Path(directory)
     if not directory.is_dir():
         raise FileNotFoundError(f"--policies: no directory {directory}")
     for config_path in sorted(directory.rglob("config.yml")):
         run = config_path.parent
-        if not (run / "model.zip").exists():
-            raise FileNotFoundError(f"policy {run} has config.yml but no model.zip")
-        config = yaml.safe_load(config_path.read_text())
-        if not isinstance(config, dict) or "env_id" not in config:
-            raise FileNotFoundError(f"policy {run}: config.yml has no env_id")
+        try:
+            if not (run / "model.zip").is_file():
+                raise ValueError("config.yml but no model.zip")
+            config = yaml.safe_load(config_path.read_text())
+            if not isinstance(config, dict) or "env_id" not in config:
+                raise ValueError("config.yml is empty or names no env_id")
+        except (OSError, ValueError, yaml.YAMLError) as error:
+            skipped[str(run)] = str(error).splitlines()[0]
+            print(f"continuum-gym evaluate: skipping {run}: {skipped[str(run)]}", file=sys.stderr)
+            continue
         base = config.get("base_controller")
         method = f"residual_{base}" if base else "pure_rl"
         found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
+    if not found and not skipped:
+        print(f"continuum-gym evaluate: warning: --policies {directory} holds no trained run (config.yml + "
+              "model.zip); evaluating the baselines only", file=sys.stderr)
     return found
 
 
@@ -121,7 +136,7 @@ def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict) -> list:
         for run in runs:
             try:
                 model, config = load_policy(run)
-                entries.append(MethodRun(model, policy_env_kwargs(spec, config)))
+                entries.append(MethodRun(model, policy_env_kwargs(spec, config), str(Path(run) / "model.zip")))
             except Exception as error:  # noqa: BLE001 - any broken run is reported and skipped, the rest runs
                 skipped[str(run)] = f"{type(error).__name__}: {error}"
                 print(f"continuum-gym evaluate: skipping {run}: {error}", file=sys.stderr)
@@ -161,7 +176,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
             kwargs["grid"] = grid
         core = make_core(env_id, count, **kwargs)
         action_dim = core.single_action_space.shape[0]
-        policy = ZeroResidual(action_dim) if run.policy is None else as_predictor(run.policy, name)
+        policy = ZeroResidual(action_dim) if run.policy is None else as_predictor(run.policy, name, run.source)
         declared = getattr(policy, "observation_shape", None)
         try:
             if declared is not None and declared != core.single_observation_space.shape:
@@ -340,7 +355,7 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     spec = get_spec(env_id)
     check_sizes(episodes, grid)
     environment, policy_kwargs, ignored = split_env_kwargs(spec, env_kwargs)
-    extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}) for run in runs])
+    extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}, run.source) for run in runs])
              for name, runs in extra]
     skipped: dict = {}
     methods = baseline_methods(spec) + discovered_methods(spec, policies or {}, skipped) + extra
@@ -436,6 +451,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true")
 
 
+def skipped_notes(skipped: dict) -> str:
+    """Markdown lines naming each policy that failed and was left out of the table, with the reason."""
+    if not skipped:
+        return ""
+    lines = "\n".join(f"- `{name}`: {reason}" for name, reason in skipped.items())
+    return f"\n**Skipped** (not in the table above):\n{lines}\n"
+
+
 def parse_env_kwargs(text: str | None) -> dict:
     """The ``--env-kwargs`` JSON object, or a named error."""
     if text is None:
@@ -460,12 +483,14 @@ def run(args) -> int:
             raise ValueError("--policy and --env-kwargs need one environment: pass --env <id>")
         for env_id in env_ids:
             split_env_kwargs(get_spec(env_id), env_kwargs)
-        policies = discover_policies(args.policies)
+        unusable: dict = {}
+        policies = discover_policies(args.policies, unusable)
         extra = []
         if args.policy:
             from continuum_gym.evaluation.policies import as_predictor, load_entry_point
 
-            extra = [(args.name, [MethodRun(as_predictor(load_entry_point(args.policy), args.name), {})])]
+            extra = [(args.name, [MethodRun(as_predictor(load_entry_point(args.policy), args.name, args.policy), {},
+                                            args.policy)])]
     except (ValueError, TypeError, FileNotFoundError) as error:
         print(f"continuum-gym evaluate: {error}", file=sys.stderr)
         return 2
@@ -480,7 +505,8 @@ def run(args) -> int:
             env_id, extra, policies, env_kwargs=env_kwargs, episodes=args.episodes, grid=args.grid,
             split=args.split, progress=not args.no_progress)
         summary[env_id] = table
-        report.append(markdown(env_id, table, results))
+        meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
+        report.append(markdown(env_id, table, results) + skipped_notes(meta[env_id]["skipped"]))
         for path in draw(env_id, results, table, policies, out):
             print(f"wrote {path}")
     seconds = time.perf_counter() - started

@@ -29,9 +29,10 @@ class PolicyError(ValueError):
 class Predictor:
     """A policy adapted to batched float32 numpy observations -> float64 actions of shape (N, k)."""
 
-    def __init__(self, policy: Any, name: str = "policy"):
+    def __init__(self, policy: Any, name: str = "policy", source: str | None = None):
         self.policy = policy
         self.name = str(name)
+        self.source = source  #: where the policy came from (a model file, an entry point), named in errors
         self.kind, self._act = _adapt(policy)
         self.steps = 0
 
@@ -41,6 +42,12 @@ class Predictor:
         space = getattr(self.policy, "observation_space", None)
         shape = getattr(space, "shape", None)
         return tuple(shape) if shape is not None else None
+
+    @property
+    def label(self) -> str:
+        """``'name' (kind[, from source])``: how errors name this policy."""
+        origin = f", from {self.source}" if self.source else ""
+        return f"{self.name!r} ({self.kind}{origin})"
 
     def act(self, observation: np.ndarray, action_dim: int) -> np.ndarray:
         """Actions (N, action_dim) for observations (N, d); raises :class:`PolicyError` on a bad answer."""
@@ -53,16 +60,16 @@ class Predictor:
         try:
             actions = np.asarray(raw, dtype=np.float64)
         except (TypeError, ValueError) as error:
-            raise PolicyError(f"policy {self.name!r} ({self.kind}) returned {type(raw).__name__}, not numbers "
+            raise PolicyError(f"policy {self.label} returned {type(raw).__name__}, not numbers "
                               f"(step {self.steps})") from error
         if actions.shape != (n, action_dim):
-            raise PolicyError(f"policy {self.name!r} ({self.kind}) returned actions of shape {actions.shape} for "
+            raise PolicyError(f"policy {self.label} returned actions of shape {actions.shape} for "
                               f"observations of shape {observation.shape}: expected ({n}, {action_dim}) "
                               f"(step {self.steps})")
         bad = ~np.isfinite(actions).all(axis=1)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
-            raise PolicyError(f"policy {self.name!r} ({self.kind}) returned a non-finite action at step {self.steps}, "
+            raise PolicyError(f"policy {self.label} returned a non-finite action at step {self.steps}, "
                               f"row {row}: {actions[row].tolist()}")
         self.steps += 1
         return actions
@@ -73,9 +80,10 @@ class Predictor:
         return self._act(observation), state
 
 
-def as_predictor(policy: Any, name: str = "policy") -> Predictor:
-    """``policy`` (callable, SB3 model, ``torch.nn.Module`` or object with ``predict``) as a :class:`Predictor`."""
-    return policy if isinstance(policy, Predictor) else Predictor(policy, name)
+def as_predictor(policy: Any, name: str = "policy", source: str | None = None) -> Predictor:
+    """``policy`` (callable, SB3 model, ``torch.nn.Module`` or object with ``predict``) as a :class:`Predictor`;
+    ``source`` (its file or entry point) is named in its errors."""
+    return policy if isinstance(policy, Predictor) else Predictor(policy, name, source)
 
 
 def _adapt(policy: Any) -> tuple[str, Callable[[np.ndarray], Any]]:

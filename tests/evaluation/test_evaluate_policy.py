@@ -123,10 +123,10 @@ def test_a_policy_that_fails_is_reported_not_a_crash_of_the_other_methods():
         calls.append(1)
         return np.zeros((obs.shape[0], 6)) if len(calls) < 5 else np.full((obs.shape[0], 6), np.inf)
 
-    table, _, meta = evaluate_methods(VIEW, [("flaky", [MethodRun(fails_later, {})])], episodes=1, grid=2,
+    table, _, meta = evaluate_methods(VIEW, [("flaky", [MethodRun(fails_later, {}, "lab/flaky.zip")])], episodes=1, grid=2,
                                       progress=False, references=False)
     assert "flaky" not in table and "dimension_reduced" in table
-    assert "non-finite" in meta["skipped"]["flaky[0]"]
+    assert "non-finite" in meta["skipped"]["flaky[0]"] and "from lab/flaky.zip" in meta["skipped"]["flaky[0]"]
     with pytest.raises(PolicyError, match="non-finite"):
         evaluate_policy(lambda obs: np.full((obs.shape[0], 6), np.inf), VIEW, episodes=1, grid=2, progress=False)
 
@@ -187,3 +187,29 @@ def test_cli_bad_input_is_a_named_error(extra, message, capsys, tmp_path):
         args += ["--env", VIEW]
     assert main(args + extra) == 2
     assert message in capsys.readouterr().err
+
+
+def test_unusable_runs_are_reported_and_skipped_and_an_empty_directory_warns(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    (runs / "no_model").mkdir(parents=True)
+    (runs / "no_model" / "config.yml").write_text(f"env_id: {VIEW}\n")
+    (runs / "empty_config").mkdir()
+    (runs / "empty_config" / "config.yml").write_text("")
+    (runs / "empty_config" / "model.zip").write_bytes(b"")
+    (runs / "garbage_model").mkdir()
+    (runs / "garbage_model" / "config.yml").write_text(f"env_id: {VIEW}\nbase_controller: dimension_reduced\n")
+    (runs / "garbage_model" / "model.zip").write_bytes(b"not a zip at all")
+    out = tmp_path / "out"
+    args = ["evaluate", "--env", VIEW, "--episodes", "1", "--grid", "2", "--out", str(out), "--no-progress"]
+    assert main(args + ["--policies", str(runs)]) == 0  # the baselines are still evaluated
+    err = capsys.readouterr().err
+    for name in ("no_model", "empty_config", "garbage_model"):
+        assert f"skipping {runs / name}" in err
+    result = json.loads((out / "results.json").read_text())
+    assert "dimension_reduced" in result[VIEW] and "residual_dimension_reduced" not in result[VIEW]
+    assert set(result["metadata"][VIEW]["skipped"]) == {str(runs / n) for n in ("no_model", "empty_config",
+                                                                                "garbage_model")}
+    assert "**Skipped**" in (out / "results.md").read_text()
+    (tmp_path / "nothing").mkdir()
+    assert main(args + ["--policies", str(tmp_path / "nothing")]) == 0
+    assert "holds no trained run" in capsys.readouterr().err
