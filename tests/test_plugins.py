@@ -29,7 +29,7 @@ from continuum_gym.registry import (
     unregister,
 )
 from continuum_gym.robots import MultiBackboneRobot
-from continuum_gym.robots.mbcr import make_workspace, tip_kernel
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
 VIEW = "ContinuumGym/ViewTracking-v0"

@@ -16,7 +16,7 @@ from numba import njit
 from continuum_gym.geometry.force_field import potential_gradient_kernel
 from continuum_gym.geometry.lens_cone import centre_distance_kernel
 from continuum_gym.robots.linalg import cholesky_solve_inplace, gram_matrix
-from continuum_gym.robots.mbcr import make_workspace, tip_kernel
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 
 #: Everything a controller evaluation reads besides the robot: gains (eq 22-24 and the tip law of

@@ -36,7 +36,7 @@ from continuum_gym.envs.custom import add_reward_terms
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.linalg import damped_gram_solve
-from continuum_gym.robots.mbcr import make_workspace, tip_kernel
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 
 OBS_LIMIT = 10.0

@@ -22,13 +22,8 @@ from continuum_gym.geometry.lens_cone import (
     resolve_cone,
     to_lens,
 )
-from continuum_gym.robots.mbcr import (
-    PAPER_PSPS,
-    MultiBackboneRobot,
-    all_finite,
-    make_workspace,
-    points_kernel,
-)
+from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
+from continuum_gym.robots.mbcr_kernels import all_finite, make_workspace, points_kernel
 from continuum_gym.validation import as_finite, positive
 
 #: What the force kernels read: d0 (m), r_star (m), f_star (N) and the exponents p, q of eq (18).

@@ -23,11 +23,10 @@ from continuum_gym.geometry.lens_cone import (
     resolve_cone,
     to_lens_cs,
 )
-from continuum_gym.robots.mbcr import (
-    MultiBackboneRobot,
+from continuum_gym.robots.mbcr import MultiBackboneRobot, backbone_sample_count
+from continuum_gym.robots.mbcr_kernels import (
     all_finite,
     backbone_kernel,
-    backbone_sample_count,
     make_workspace,
 )
 from continuum_gym.validation import as_finite, integer

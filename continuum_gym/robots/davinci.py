@@ -118,7 +118,7 @@ class DaVinciEndoscope:
     dof = DOF
     joint_names = ("L_dV", "yaw", "pitch", "roll")
 
-    def __init__(self, alpha: float = np.pi / 6, Le: float = 0.120, alpha_convention: str = "eq2"):
+    def __init__(self, alpha: float = np.pi / 6, Le: float = 0.120, alpha_convention: str = "eq2") -> None:
         self._alpha = angle_in_open_interval(alpha, "alpha", -np.pi / 2, np.pi / 2, "(-pi/2, pi/2)")
         self._Le = positive(Le, "Le", "m")
         self._convention = choice(alpha_convention, ALPHA_CONVENTIONS, "alpha_convention")

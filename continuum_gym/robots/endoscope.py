@@ -361,7 +361,7 @@ class ContinuumEndoscope:
     joint_names = ("L0", "phi", "theta1", "delta1", "theta2", "delta2")
 
     def __init__(self, L1: float = 0.020, Lm: float = 0.006, L2: float = 0.030, Lc: float = 0.020,
-                 Le: float = 0.120, joint_limits=None):
+                 Le: float = 0.120, joint_limits=None) -> None:
         self._args = EndoscopeKernelArgs(positive(L1, "L1", "m"), positive(Lm, "Lm", "m"), positive(L2, "L2", "m"),
                                          positive(Lc, "Lc", "m"), positive(Le, "Le", "m"))
         self._geom = _read_only(self._args)

@@ -13,7 +13,7 @@ from continuum_gym.baselines import OcclusionLimits
 from continuum_gym.evaluation.optimum.workers import positive_int
 from continuum_gym.robots import MultiBackboneRobot
 from continuum_gym.robots.linalg import damped_gram_solve
-from continuum_gym.robots.mbcr import make_workspace, tip_kernel
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 from continuum_gym.validation import as_finite, positive
 
@@ -154,7 +154,7 @@ JOINT_NAMES = ("theta1", "delta1", "theta2", "delta2", "theta3", "delta3", "q_in
 class SelfMotionTracer:
     """Predictor-corrector continuation on the self-motion set of the tip pose (p0, R0)."""
 
-    def __init__(self, robot, p0, R0, lower, upper, step, tolerance):
+    def __init__(self, robot, p0, R0, lower, upper, step: int, tolerance) -> None:
         self.robot_args = robot.kernel_args()
         self.p0 = np.ascontiguousarray(p0, dtype=float)
         self.R0 = np.ascontiguousarray(R0, dtype=float)
@@ -187,7 +187,7 @@ class SelfMotionTracer:
                                        NEWTON_MAX_ITERATIONS)
         return qn if it >= 0 and moved < 0.5 * h else None
 
-    def walk(self, q, t, max_steps, origin=None, step=None):
+    def walk(self, q, t, max_steps, origin=None, step: int | None = None):
         """Points after q along direction t (scaled space); returns (points, reason)."""
         nominal = self.step if step is None else step
         h = nominal
@@ -235,7 +235,7 @@ class SelfMotionTracer:
         return float(np.linalg.norm(d))
 
 
-def trace_self_motion(robot, q0, limits, step=TRACE_STEP, max_steps=20_000, tolerance=NEWTON_TOLERANCE):
+def trace_self_motion(robot, q0, limits, step: int = TRACE_STEP, max_steps=20_000, tolerance=NEWTON_TOLERANCE):
     """The self-motion arc of the tip pose of q0 by predictor-corrector continuation.
 
     7 joints and a 6-D tip pose leave a one-dimensional set of configurations with the same tip pose.
