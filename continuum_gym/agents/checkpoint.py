@@ -275,7 +275,7 @@ class CheckpointCallback(BaseCallback):
 
     def __init__(self, folder, freq_steps: int, minutes: float, keep: int,
                  state: Callable[[], dict] | None = None, files: Callable[[], dict[str, Writer]] | None = None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()
         self.folder = Path(folder)
         self.freq_steps, self.seconds, self.keep = int(freq_steps), float(minutes) * 60.0, int(keep)

@@ -59,7 +59,7 @@ class ActorBurnIn(BaseCallback):
     resumed run takes from its checkpoint (``save_snapshot`` / ``load_snapshot``).
     """
 
-    def __init__(self, steps: int, snapshot: list[torch.Tensor] | None = None, verbose: int = 0):
+    def __init__(self, steps: int, snapshot: list[torch.Tensor] | None = None, verbose: int = 0) -> None:
         super().__init__(verbose)
         self.steps = int(steps)
         self._snapshot = snapshot

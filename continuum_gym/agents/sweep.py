@@ -106,7 +106,7 @@ def trial_tag(config: dict) -> str:
     return f"cfg{digest}_seed{config['seed']}"
 
 
-def run_trial(config, env_id, algo, base, steps, out, hp_file, report=None):
+def run_trial(config, env_id: str, algo: str, base, steps, out, hp_file, report=None):
     """One trial = one ``train()`` run with the trial's overrides; resumes if its checkpoint exists."""
     overrides = {k: v for k, v in config.items() if k != "seed"}
     trial_dir = Path(out) / "trials" / trial_tag(config)
@@ -152,8 +152,8 @@ def check_sweep_arguments(seeds, steps, cpus_per_trial, search, out) -> tuple[li
     return seeds, steps, cpus
 
 
-def sweep(env_id, algo, base, seeds, steps=None, search=None, address=None, cpus_per_trial=1, out="sweeps",
-          resume=False, name=None, hyperparams=None, max_failures=2) -> dict:
+def sweep(env_id: str, algo: str, base, seeds, steps=None, search=None, address=None, cpus_per_trial=1, out="sweeps",
+          resume: bool = False, name: str | None = None, hyperparams=None, max_failures=2) -> dict:
     """Run the sweep; returns the results summary (also written to ``<out>/<name>/``).
 
     Every argument is checked before Ray starts: ``ValueError`` naming the parameter and its range.
@@ -202,7 +202,7 @@ def sweep(env_id, algo, base, seeds, steps=None, search=None, address=None, cpus
     return summary
 
 
-def summarise(results, metric, mode, env_id, algo, sweep_dir: Path, hp_file=None) -> dict:
+def summarise(results, metric, mode, env_id: str, algo: str, sweep_dir: Path, hp_file=None) -> dict:
     """Per-trial table, per-configuration statistics over seeds, best config in the trainer's YAML format."""
     rows = []
     for result in results:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from continuum_gym.agents.evaluation_callback import history_until, make_eval_callback
 from continuum_gym.agents.run_inputs import (
     SCHEDULE_KEYS,
     check_combination,
@@ -52,7 +53,6 @@ from continuum_gym.evaluation.io import (
 
 ALGOS = ("ppo", "sac", "td3")
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
-EVAL_TASK_OFFSET = 0
 # Values of the run keys when a block leaves them out.
 RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000, "n_eval_episodes": 16,
                 "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2, "normalize_reward": False}
@@ -98,7 +98,7 @@ def resolve_hyperparams(algo: str, env_id: str, path=None) -> dict:
     return check_hyperparams(block, _algo_class(algo), algo, source)
 
 
-def linear_schedule(value, name):
+def linear_schedule(value, name: str):
     """rl-zoo's ``lin_<x>``: decay linearly from x to 0 over the run (SB3 passes the remaining fraction)."""
     if not isinstance(value, str):
         return value
@@ -110,7 +110,7 @@ def linear_schedule(value, name):
     return LinearSchedule(initial, 0.0, 1.0)
 
 
-def validate(env_id, algo, base) -> None:
+def validate(env_id: str, algo: str, base) -> None:
     """``ValueError`` unless env_id is known, algo one of ``ALGOS`` and base one of the env's baselines or None."""
     spec = get_spec(env_id)
     if algo not in ALGOS:
@@ -147,78 +147,6 @@ def notice(message: str) -> None:
 def headline_metric(env_id: str) -> str:
     """The held-out metric a run is judged by (its spec's; lower is better for VOI, higher for OR)."""
     return get_spec(env_id).headline_metric
-
-
-def make_eval_callback(env_id, env_kwargs, run_dir, freq, n_episodes, report=None, history=None):
-    """Periodic evaluation on held-out test tasks (fixed ids), logged to TensorBoard and evaluations.npz.
-
-    ``freq`` is in environment steps. ``history`` (``{column: list}``, from a checkpoint) continues an
-    earlier learning curve: the next evaluation is ``freq`` steps after its last row, not at once.
-    ``report(timesteps, value)`` is called after each evaluation (a sweep scheduler listens there).
-    """
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    from continuum_gym.evaluation.rollout import make_core, run_episodes
-
-    kwargs = {**env_kwargs, "task_split": "test"}
-    core = make_core(env_id, n_episodes, **kwargs)
-    task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)
-    metric = headline_metric(env_id)
-    path = run_dir / "evaluations.npz"
-
-    class _Eval(BaseCallback):
-        def __init__(self):
-            super().__init__()
-            self.history = {"timesteps": [], "mean_return": [], metric: []}
-            for key, values in (history or {}).items():
-                self.history[key] = list(values)
-            self.last = self.history["timesteps"][-1] if self.history["timesteps"] else -freq
-
-        def _on_step(self) -> bool:
-            if self.num_timesteps - self.last >= freq:
-                self.evaluate()
-            return True
-
-        def _on_training_end(self) -> None:
-            if not self.history["timesteps"] or self.history["timesteps"][-1] != self.num_timesteps:
-                self.evaluate()
-
-        def records(self) -> dict:
-            """The curve so far as JSON-able lists (what a checkpoint stores)."""
-            return {key: [int(v) if key == "timesteps" else float(v) for v in values]
-                    for key, values in self.history.items()}
-
-        def write(self) -> None:
-            buffer = io.BytesIO()
-            np.savez(buffer, **{k: np.asarray(v) for k, v in self.history.items()})
-            write_bytes_atomic(path, buffer.getvalue())
-
-        def evaluate(self):
-            self.last = self.num_timesteps
-            result = run_episodes(core, self.model, task_ids)
-            self.history["timesteps"].append(int(self.num_timesteps))
-            self.history["mean_return"].append(float(result["return"].mean()))
-            self.history[metric].append(float(result[metric].mean()))
-            self.logger.record("eval/mean_return", float(result["return"].mean()))
-            self.logger.record(f"eval/{metric}", float(result[metric].mean()))
-            self.write()
-            if report is not None:
-                report(int(self.num_timesteps), float(result[metric].mean()))
-
-    return _Eval()
-
-
-def _history_until(path: Path, step: int) -> dict:
-    """Rows of an old-layout evaluations.npz up to ``step``, strictly increasing (old resumes duplicated rows)."""
-    if not path.is_file():
-        return {}
-    data = np.load(path)
-    keep, last = [], -np.inf
-    for index, timestep in enumerate(data["timesteps"]):
-        if last < timestep <= step:
-            keep.append(index)
-            last = timestep
-    return {key: data[key][keep].tolist() for key in data.files}
 
 
 @contextlib.contextmanager
@@ -286,8 +214,8 @@ def _starting_point(run_dir: Path, resume: bool, total: int):
     return None, False
 
 
-def train(env_id, algo="ppo", base="__default__", seed=0, steps=None, out="runs", resume=False,
-          hyperparams=None, progress=True, command=None, n_envs=None, report=None) -> Path:
+def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, steps=None, out="runs", resume: bool = False,
+          hyperparams=None, progress: bool = True, command=None, n_envs=None, report=None) -> Path:
     """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base.
 
     ``steps`` is the total number of environment steps (summed over the vector env). Raises
@@ -414,7 +342,7 @@ def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit
         if base is not None:
             zero_init_residual(model)
         state = {}
-    history = state.get("evaluations") if unit is None or not unit.legacy else _history_until(
+    history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
         run_dir / "evaluations.npz", unit.step)
     evaluator = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
                                    int(run["n_eval_episodes"]), report, history=history)

@@ -151,14 +151,6 @@ def test_bad_cli_input_fails_clearly(argv, message, capsys, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-def test_missing_policy_file_is_an_error(tmp_path, capsys):
-    run = tmp_path / "pol" / "run"
-    run.mkdir(parents=True)
-    (run / "config.yml").write_text(yaml.safe_dump({"env_id": VIEW, "algo": "ppo", "base_controller": None}))
-    assert main(["evaluate", "--policies", str(tmp_path / "pol"), "--out", str(tmp_path / "out")]) == 2
-    assert "model.zip" in capsys.readouterr().err
-
-
 # ---------------------------------------------------------------- statistics
 def test_bootstrap_intervals_cover_a_known_mean():
     rng = np.random.default_rng(0)
