@@ -53,7 +53,7 @@ class CustomController:
     params: np.ndarray
     doc: str = ""
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=False):
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """SB3 ``predict`` on a controller observation dict (``core.controller_observation(row)``)."""
         from continuum_gym.envs.custom import controller_predict
 

@@ -139,7 +139,7 @@ class OcclusionController(Controller):
 
     def __init__(self, robot: MultiBackboneRobot | None = None, cone=None, field=None, psps=None, eta1: float = 30.0,
                  eta2: float = 30.0, epsilon: float = 1e-6, k_track: float = 100.0, v_max: float = 0.05,
-                 w_max: float = 1.0, rotate_endoscope: bool = True, limits: OcclusionLimits | None = None):
+                 w_max: float = 1.0, rotate_endoscope: bool = True, limits: OcclusionLimits | None = None) -> None:
         self.robot = robot if robot is not None else MultiBackboneRobot()
         if not isinstance(self.robot, MultiBackboneRobot):
             raise ValueError(f"robot must be a MultiBackboneRobot; got {type(self.robot).__name__}")
@@ -274,7 +274,7 @@ class OcclusionController(Controller):
             return q_traj[0], gamma_traj[0]
         return q_traj, gamma_traj
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=False):
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """SB3 ``predict``: observation dict with ``q``, ``gamma``, ``p_des``, ``R_des`` (and ``v_des``).
 
         Returns (rates (..., dof + 1), None): the same command as ``joint_rates``.

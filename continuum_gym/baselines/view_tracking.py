@@ -262,7 +262,7 @@ class ViewTrackingController(Controller):
     method = DR
     action_dim = DOF
 
-    def __init__(self, robot=None, v_lim=0.1, w_lim=math.pi / 2, damping=0.01, lower=None, upper=None):
+    def __init__(self, robot=None, v_lim=0.1, w_lim=math.pi / 2, damping=0.01, lower=None, upper=None) -> None:
         self.robot = robot if robot is not None else ContinuumEndoscope()
         if not isinstance(self.robot, ContinuumEndoscope):
             raise ValueError(f"robot must be a ContinuumEndoscope; got {type(self.robot).__name__}")
@@ -337,7 +337,7 @@ class ViewTrackingController(Controller):
             result["history"] = history.reshape(shape + (int(max_steps) + 1, DOF))
         return result
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=False):
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """SB3 ``predict``: observation dict with ``q``, ``p_target``, ``R_target`` (and optional ``dt``)."""
         obs = self._observation_dict(observation, ("q", "p_target", "R_target"))
         target = (obs["p_target"], as_rotation_field(obs["R_target"]))

@@ -36,7 +36,7 @@ def _clip_rows(array, clipped):
     return True
 
 
-def check_actions(actions, shape, name="action") -> tuple[np.ndarray, np.ndarray]:
+def check_actions(actions, shape, name: str = "action") -> tuple[np.ndarray, np.ndarray]:
     """Validate actions: exact shape, finite; clip to [-1, 1] and report which rows were clipped.
 
     Returns a fresh (N, d) float64 array (the caller's array is never modified) and a bool mask (N,).
@@ -60,11 +60,25 @@ PARALLEL_BALANCE_ROWS = 256
 _EXECUTORS: dict = {}
 
 
-def parallel_chunks(num_envs: int) -> int:
-    """Number of row chunks for the threaded kernels (1 = serial)."""
+def step_threads(num_threads=None) -> int:
+    """Threads a core steps its rows on: ``num_threads`` in [1, NUMBA_NUM_THREADS], or the default.
+
+    The default avoids oversubscription: 1 when torch is loaded in the process (a learner such as SB3,
+    torchrl or skrl computes there with its own threads; two thread pools on the same cores collapse
+    both), else numba's thread count (``NUMBA_NUM_THREADS`` or ``numba.set_num_threads``). The caller's
+    OpenMP and torch settings are never changed: the rows run on a pool of Python threads.
+    """
+    import sys
+
     import numba
 
-    threads = numba.get_num_threads()
+    if num_threads is None:
+        return 1 if "torch" in sys.modules else numba.get_num_threads()
+    return integer(num_threads, "num_threads", low=1, high=numba.config.NUMBA_NUM_THREADS)
+
+
+def parallel_chunks(num_envs: int, threads: int) -> int:
+    """Number of row chunks for the threaded kernels (1 = serial)."""
     if num_envs < PARALLEL_MIN_ROWS or threads < 2:
         return 1
     # Each chunk's call unboxes the kernel bundles holding the GIL (~10 us): one chunk per thread for
@@ -72,18 +86,14 @@ def parallel_chunks(num_envs: int) -> int:
     return threads if num_envs < PARALLEL_BALANCE_ROWS else 4 * threads
 
 
-def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int) -> None:
+def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int, threads: int = 1) -> None:
     """``kernel(*args, start, stop)`` over ``n_chunks`` contiguous row ranges covering [0, num_rows).
 
-    The step kernels release the GIL, so the chunks run on a pool of Python threads (as many as
-    numba's thread count): the caller's OpenMP and torch thread settings are never touched.
+    The step kernels release the GIL, so the chunks run on a pool of ``threads`` Python threads.
     """
     if n_chunks <= 1:
         kernel(*args, 0, num_rows)
         return
-    import numba
-
-    threads = numba.get_num_threads()
     executor = _EXECUTORS.get(threads)
     if executor is None:
         from concurrent.futures import ThreadPoolExecutor
@@ -110,19 +120,20 @@ class KernelCall:
     active (N,) uint8) have another type, layout or flag goes through the dispatcher as before.
     """
 
-    def __init__(self, kernel):
+    def __init__(self, kernel) -> None:
         self.kernel = kernel
         self.entry = None
 
-    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, n_chunks: int) -> None:
+    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, n_chunks: int,
+                 threads: int = 1) -> None:
         if not (_is_kernel_array(actions, np.float64, 2) and _is_kernel_array(active, np.uint8, 1)):
-            run_in_chunks(self.kernel, args, num_rows, n_chunks)
+            run_in_chunks(self.kernel, args, num_rows, n_chunks, threads)
             return
         if self.entry is None:
             signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, 0, 0))
             self.kernel.compile(signature)
             self.entry = self.kernel.overloads[signature].entry_point
-        run_in_chunks(self.entry, args, num_rows, n_chunks)
+        run_in_chunks(self.entry, args, num_rows, n_chunks, threads)
 
 
 class BatchedCore:
@@ -166,7 +177,7 @@ class BatchedCore:
         """Every ``info`` entry of one row: numpy scalars and fresh arrays."""
         return info_row(self.info_fields, self, row)
 
-    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:  # pragma: no cover - interface
+    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray):  # pragma: no cover - interface
         raise NotImplementedError
 
     def step(self, actions: np.ndarray, active: np.ndarray):  # pragma: no cover - interface
@@ -292,7 +303,7 @@ class BatchedCore:
 
 
 # ---------------------------------------------------------------------- stable-baselines3 adapter
-def make_sb3_vec_env(env_id: str, num_envs: int, seed=None, **kwargs):
+def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **kwargs):
     """An SB3 ``VecEnv`` backed by the native batched core of ``env_id`` (same-step reset)."""
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
 

@@ -62,7 +62,7 @@ class ContinuumGoalEnv(gym.Env):
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, reward_type: str = "dense", render_mode: str | None = None, camera: str = "external",
-                 **kwargs: Any):
+                 **kwargs: Any) -> None:
         self.reward_type = choice(reward_type, REWARD_TYPES, "reward_type")
         self._check_goal_kwargs(kwargs)
         self.base = gym.make(self.base_id, render_mode=render_mode, camera=camera, **kwargs).unwrapped
@@ -102,7 +102,7 @@ class ContinuumGoalEnv(gym.Env):
     def render(self):
         return self.base.render()
 
-    def close(self):
+    def close(self) -> None:
         self.base.close()
 
 
@@ -111,7 +111,7 @@ class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
     base_id = "ContinuumGym/OcclusionAvoidance-v0"
 
     def __init__(self, reward_type: str = "dense", tolerance_m: float = 1e-3, tolerance_rad: float = 0.05,
-                 **kwargs: Any):
+                 **kwargs: Any) -> None:
         self.tolerance_m = positive(tolerance_m, "tolerance_m", "m")
         self.tolerance_rad = positive(tolerance_rad, "tolerance_rad", "rad")
         super().__init__(reward_type, **kwargs)
@@ -140,7 +140,7 @@ class ViewTrackingGoalEnv(ContinuumGoalEnv):
     __doc__ = __doc__
     base_id = "ContinuumGym/ViewTracking-v0"
 
-    def __init__(self, reward_type: str = "dense", or_threshold: float = 0.8, **kwargs: Any):
+    def __init__(self, reward_type: str = "dense", or_threshold: float = 0.8, **kwargs: Any) -> None:
         self.or_threshold = fraction(or_threshold, "or_threshold")
         super().__init__(reward_type, **kwargs)
 

@@ -29,7 +29,7 @@ class InfoField:
 class Column:
     """Reader of column ``index`` of the core's (N, k) array ``attribute`` (as ``kind``: float or bool)."""
 
-    def __init__(self, attribute: str, index: int, kind: type = float):
+    def __init__(self, attribute: str, index: int, kind: type = float) -> None:
         self.attribute, self.index, self.kind = attribute, index, kind
 
     def __call__(self, core) -> np.ndarray:
@@ -44,7 +44,7 @@ class Column:
 class Bits:
     """Reader of a per-joint bit mask stored in column ``index`` of ``attribute``: (N, dof) bools."""
 
-    def __init__(self, attribute: str, index: int):
+    def __init__(self, attribute: str, index: int) -> None:
         self.attribute, self.index = attribute, index
 
     def __call__(self, core) -> np.ndarray:
@@ -59,7 +59,7 @@ class Bits:
 class Attribute:
     """Reader of a per-row array of the core, by a dotted path (``gamma``, ``base_cmd``, ``tasks.task_id``)."""
 
-    def __init__(self, path: str):
+    def __init__(self, path: str) -> None:
         self.path = path.split(".")
 
     def __call__(self, core) -> np.ndarray:
@@ -75,7 +75,7 @@ class Attribute:
 class AtMost:
     """Reader of ``attribute[:, index] <= bound`` (bools)."""
 
-    def __init__(self, attribute: str, index: int, bound: float):
+    def __init__(self, attribute: str, index: int, bound: float) -> None:
         self.attribute, self.index, self.bound = attribute, index, bound
 
     def __call__(self, core) -> np.ndarray:

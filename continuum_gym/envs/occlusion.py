@@ -10,6 +10,7 @@ from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
     BatchedCore,
     parallel_chunks,
+    step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import OcclusionConfig
@@ -90,7 +91,8 @@ class OcclusionCore(BatchedCore):
     metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
 
-    def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, **kwargs):
+    def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, num_threads: int | None = None,
+                 **kwargs) -> None:
         self.config = config = self._config(config, kwargs)
         self.num_envs = self._num_envs(num_envs)
         self.task, self.task_split = config.task, config.task_split
@@ -130,7 +132,8 @@ class OcclusionCore(BatchedCore):
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
-        self.n_chunks = parallel_chunks(n)
+        self.num_threads = step_threads(num_threads)
+        self.n_chunks = parallel_chunks(n, self.num_threads)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         guard = self.visibility_guard
@@ -165,7 +168,8 @@ class OcclusionCore(BatchedCore):
 
     def step(self, actions: np.ndarray, active: np.ndarray):
         self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,
-                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks)
+                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks,
+                        self.num_threads)
         self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
@@ -282,6 +286,9 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
     (``continuum_gym.envs.config``); physics limits the paper lacks are assumptions (paper-notes §5).
     Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"`` or
     ``"endoscope"``), ``pixel_occlusion`` (add the pixel-occlusion fraction to ``info``; slow).
+    ``num_threads``: threads a batch of 32 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
+    default 1 when torch is loaded in the process, so a learner's own threads are not oversubscribed,
+    else all of numba's threads); results do not depend on it.
 
 {arguments}
 

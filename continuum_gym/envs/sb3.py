@@ -46,7 +46,7 @@ class ContinuumSB3VecEnv(VecEnv):
     """
 
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
-                 camera: str = "external", **kwargs: Any):
+                 camera: str = "external", **kwargs: Any) -> None:
         from continuum_gym.envs.single import check_render_arguments
 
         self.env_id = env_id
@@ -76,7 +76,7 @@ class ContinuumSB3VecEnv(VecEnv):
         self._lengths[:] = 0
         return self.core.obs.astype(np.float32)
 
-    def step_async(self, actions):
+    def step_async(self, actions) -> None:
         shape = (self.num_envs,) + self.action_space.shape
         if np.shape(actions) != shape:  # never reshape: (2, 16) for (4, 8) would scramble the rows
             raise ValueError(f"actions must have shape {shape} (num_envs, action dim); got {np.shape(actions)}")
@@ -111,7 +111,7 @@ class ContinuumSB3VecEnv(VecEnv):
             self._lengths[finished] = 0
         return obs, rewards, dones, infos
 
-    def close(self):
+    def close(self) -> None:
         if self._scene is not None:
             self._scene.close()
             self._scene = None
@@ -120,7 +120,7 @@ class ContinuumSB3VecEnv(VecEnv):
         owner = self.core if hasattr(self.core, attr_name) else self
         return [getattr(owner, attr_name) for _ in self._indices(indices)]
 
-    def set_attr(self, attr_name, value, indices=None):
+    def set_attr(self, attr_name, value, indices=None) -> None:
         """Set an attribute of the core; its rows share it, so ``indices`` must select every row."""
         if sorted(self._indices(indices)) != list(range(self.num_envs)):
             raise ValueError(f"set_attr({attr_name!r}): the {self.num_envs} rows share one batched core, so the "

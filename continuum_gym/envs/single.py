@@ -44,14 +44,36 @@ def check_render_arguments(metadata: dict, core: BatchedCore, render_mode: Any, 
     return render_mode, camera, pixel_occlusion
 
 
-class ContinuumEnv(gym.Env):
+class SceneOwner:
+    """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""
+
+    _scene = None
+
+    def scene(self):
+        """The pybullet scene that renders this env's rows (built on first use; ``close()`` releases it)."""
+        if self._scene is None:
+            self._scene = self.core.make_scene()
+        return self._scene
+
+    def close_scene(self) -> None:
+        if self._scene is not None:
+            self._scene.close()
+            self._scene = None
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_scene"] = None  # pybullet clients do not pickle; rebuilt on demand
+        return state
+
+
+class ContinuumEnv(SceneOwner, gym.Env):
     """A core of one behind ``gymnasium.Env`` (subclasses set ``core_class`` and the docstring)."""
 
     core_class: type = BatchedCore
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
-                 **kwargs: Any):
+                 **kwargs: Any) -> None:
         self.core = self.core_class(num_envs=1, **kwargs)
         self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
             self.metadata, self.core, render_mode, camera, pixel_occlusion)
@@ -94,24 +116,11 @@ class ContinuumEnv(gym.Env):
             info["pixel_occlusion"] = np.float64(self.core.pixel_occlusion(0, self.scene()))
         return info
 
-    def scene(self):
-        """The pybullet scene that renders this env (built on first use; ``close()`` releases it)."""
-        if self._scene is None:
-            self._scene = self.core.make_scene()
-        return self._scene
-
     def render(self):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
         return self.core.render_row(0, self.scene(), self.camera)
 
-    def close(self):
-        if self._scene is not None:
-            self._scene.close()
-            self._scene = None
-
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state["_scene"] = None  # pybullet clients do not pickle; rebuilt on demand
-        return state
+    def close(self) -> None:
+        self.close_scene()

@@ -360,7 +360,7 @@ class TaskSource:
 class BuiltinTasks(TaskSource):
     """One of the papers' or the library's families."""
 
-    def __init__(self, name: str, occlusion: bool):
+    def __init__(self, name: str, occlusion: bool) -> None:
         self.name, self.occlusion = name, occlusion
 
     @property
@@ -428,7 +428,7 @@ def _reached_start(robot, max_bend, insertion, p_bytes, R_bytes):
 class RecordedTasks(TaskSource):
     """Recorded trajectories as tasks: task id k is the k-th trajectory (every split sees all of them)."""
 
-    def __init__(self, trajectories: Sequence, kind: type, name: str = "recorded"):
+    def __init__(self, trajectories: Sequence, kind: type, name: str = "recorded") -> None:
         trajectories = list(trajectories)
         if not trajectories:
             raise ValueError("task: a list of recorded trajectories must hold at least one")
@@ -460,7 +460,7 @@ class RecordedTasks(TaskSource):
 class SampledTasks(TaskSource):
     """A registered family: ``sampler(task_id, split, rng)`` returns the trajectory of each instance."""
 
-    def __init__(self, name: str, sampler: Callable, kind: type, count: int | None = None):
+    def __init__(self, name: str, sampler: Callable, kind: type, count: int | None = None) -> None:
         self.name, self.sampler, self.kind = name, sampler, kind
         self.instances = UNBOUNDED if count is None else int(count)
         self._seed = int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "little")
@@ -490,7 +490,7 @@ def task_names(env_id: str, builtin: Sequence[str]) -> tuple:
     return (*builtin, *registry.TASKS.get(env_id, {}))
 
 
-def resolve_task(task, env_id: str, builtin: Sequence[str], occlusion: bool) -> TaskSource:
+def resolve_task(task: str, env_id: str, builtin: Sequence[str], occlusion: bool) -> TaskSource:
     """A task source from a config's ``task``: a name, a recorded trajectory, a list of them, or a source."""
     from continuum_gym.validation import choice
 

@@ -195,7 +195,7 @@ def hermite_point(t_knots, x_knots, m_knots, n, t, p, v):
         v[a] = d00 * x_knots[lo, a] + d10 * m_knots[lo, a] + d01 * x_knots[hi, a] + d11 * m_knots[hi, a]
 
 
-def as_trajectory(task, kind: type):
+def as_trajectory(task: str, kind: type):
     """``task`` if it is a ``kind``, else ``ValueError`` naming what was given."""
     if not isinstance(task, kind):
         raise ValueError(f"task must be a {kind.__name__} here; got {describe(task)}")

@@ -26,7 +26,11 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
-from continuum_gym.envs.single import check_render_arguments, check_reset_options
+from continuum_gym.envs.single import (
+    SceneOwner,
+    check_render_arguments,
+    check_reset_options,
+)
 from continuum_gym.validation import describe, integer
 
 #: Keys ``reset(options=...)`` understands: task ids per row, and the rows to reset.
@@ -63,7 +67,7 @@ def autoreset_mode_of(value: Any) -> AutoresetMode:
                      f"{[m.value for m in AutoresetMode]} (any case, e.g. 'same_step'); got {describe(value)}")
 
 
-class ContinuumVectorEnv(VectorEnv):
+class ContinuumVectorEnv(SceneOwner, VectorEnv):
     """N robots as arrays, stepped by one compiled call (see the module docstring for autoreset and info)."""
 
     core_class: type = BatchedCore
@@ -72,7 +76,7 @@ class ContinuumVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  camera: str = "external", pixel_occlusion: bool = False,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any):
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
         self.num_envs = integer(num_envs, "num_envs", low=1)
         self.core = self.core_class(num_envs=self.num_envs, max_episode_steps=max_episode_steps, **kwargs)
         self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
@@ -188,12 +192,6 @@ class ContinuumVectorEnv(VectorEnv):
         return info
 
     # ------------------------------------------------------------------ rendering
-    def scene(self):
-        """The pybullet scene that renders the rows (built on first use; ``close()`` releases it)."""
-        if self._scene is None:
-            self._scene = self.core.make_scene()
-        return self._scene
-
     def render(self):
         """A tuple of one RGB image per row (``render_mode="rgb_array"``; about 10 ms per row)."""
         if self.render_mode is None:
@@ -203,14 +201,7 @@ class ContinuumVectorEnv(VectorEnv):
         return tuple(self.core.render_row(row, scene, self.camera) for row in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
-        if self._scene is not None:
-            self._scene.close()
-            self._scene = None
-
-    def __getstate__(self):
-        state = self.__dict__.copy()
-        state["_scene"] = None
-        return state
+        self.close_scene()
 
 
 __all__ = ["ContinuumVectorEnv", "row_generators", "autoreset_mode_of", "VECTOR_RESET_OPTIONS"]

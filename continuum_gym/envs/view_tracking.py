@@ -12,6 +12,7 @@ from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
     BatchedCore,
     parallel_chunks,
+    step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.config import ViewTrackingConfig
@@ -77,7 +78,8 @@ class ViewTrackingCore(BatchedCore):
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR}
     dof = ACTION_DIM
 
-    def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, **kwargs):
+    def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, num_threads: int | None = None,
+                 **kwargs) -> None:
         self.config = config = self._config(config, kwargs)
         self.num_envs = self._num_envs(num_envs)
         self.task, self.task_split = config.task, config.task_split
@@ -113,7 +115,8 @@ class ViewTrackingCore(BatchedCore):
         self.terms = np.zeros((n, len(self.reward_names)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
-        self.n_chunks = parallel_chunks(n)
+        self.num_threads = step_threads(num_threads)
+        self.n_chunks = parallel_chunks(n, self.num_threads)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
@@ -142,7 +145,8 @@ class ViewTrackingCore(BatchedCore):
 
     def step(self, actions: np.ndarray, active: np.ndarray):
         self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,
-                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks)
+                         self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks,
+                        self.num_threads)
         self._add_numpy_terms(actions, active)
         return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
 
@@ -250,6 +254,9 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     [0, pi/2]; deltas wrapped to [-pi, pi); clamping is reported in ``info["clamped_joints"]``.
     Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"``,
     ``"endoscope"`` or ``"davinci"``).
+    ``num_threads``: threads a batch of 32 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
+    default 1 when torch is loaded in the process, so a learner's own threads are not oversubscribed,
+    else all of numba's threads); results do not depend on it.
 
 {arguments}
 

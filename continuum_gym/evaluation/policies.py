@@ -29,7 +29,7 @@ class PolicyError(ValueError):
 class Predictor:
     """A policy adapted to batched float32 numpy observations -> float64 actions of shape (N, k)."""
 
-    def __init__(self, policy: Any, name: str = "policy", source: str | None = None):
+    def __init__(self, policy: Any, name: str = "policy", source: str | None = None) -> None:
         self.policy = policy
         self.name = str(name)
         self.source = source  #: where the policy came from (a model file, an entry point), named in errors

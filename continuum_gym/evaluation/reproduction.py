@@ -42,7 +42,7 @@ SWEEP_STARTS = 60
 
 
 # ---------------------------------------------------------------------- parts
-def hold_part(robot, n_starts, seed):
+def hold_part(robot, n_starts: int, seed: int):
     p0, R0 = robot.forward_kinematics(robot.psi_a)
     p_des = np.broadcast_to(p0, (HOLD_ITERATIONS, 3))
     R_des = np.broadcast_to(R0, (HOLD_ITERATIONS, 3, 3))
@@ -144,7 +144,7 @@ def case_part(endo, davinci):
     return out
 
 
-def coverage_part(endo, davinci, grid):
+def coverage_part(endo, davinci, grid: int):
     targets = coverage_grid(grid)
     target_pose = davinci.target_pose(targets)
     start = np.broadcast_to(CASE_STUDY_START, (len(targets), 6))
@@ -159,7 +159,7 @@ def coverage_part(endo, davinci, grid):
 
 
 # ---------------------------------------------------------------------- report
-def reproduce(quick: bool = False, grid=None, progress=True) -> dict:
+def reproduce(quick: bool = False, grid: int | None = None, progress: bool = True) -> dict:
     """Run all parts; returns the nested results dict (SI units unless a key says otherwise)."""
     from tqdm.auto import tqdm
 

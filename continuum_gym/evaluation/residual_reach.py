@@ -51,7 +51,7 @@ def hold_effort(q, q_davinci, residual_scale, controller=None, control_dt=CONTRO
 class _EffortKernel:
     """The hold effort of one configuration towards one target pose, with its work arrays allocated once."""
 
-    def __init__(self, controller, residual_scale, control_dt=CONTROL_DT):
+    def __init__(self, controller, residual_scale, control_dt=CONTROL_DT) -> None:
         from continuum_gym.envs.view_tracking import ACTION_SCALE
 
         self.robot, self.params = controller.robot.kernel_args(), controller.params
@@ -65,7 +65,7 @@ class _EffortKernel:
         return float(np.max(np.abs(self.rates) / self.reach))
 
 
-def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restarts=3, seed=0):
+def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restarts=3, seed: int = 0):
     """Replace each configuration the residual cannot hold by the best-OR one it can hold nearby.
 
     Nelder-Mead from q* (and ``restarts - 1`` starts jittered by 0.05) within the joint limits; a result
@@ -108,7 +108,7 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
     return q_out, overlaps, efforts
 
 
-def reach_ceiling(residual_scales, grid=21, effort="quick", workers=2, progress=True) -> dict:
+def reach_ceiling(residual_scales, grid: int = 21, effort="quick", workers: int = 2, progress: bool = True) -> dict:
     """Coverage (%) of the paper's grid that a perfect joint-rate residual of each scale reaches and holds.
 
     Returns {"optimum_percent": ..., "ceiling_percent": {scale: ...}}: a point counts if its holdable

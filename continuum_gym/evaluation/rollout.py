@@ -15,10 +15,10 @@ from continuum_gym.envs.spec import get_spec
 class ZeroResidual:
     """The analytic baseline inside a residual env: always a zero action (SB3 ``predict`` signature)."""
 
-    def __init__(self, action_dim: int):
+    def __init__(self, action_dim: int) -> None:
         self.action_dim = int(action_dim)
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=False):
+    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         observation = np.asarray(observation)
         return np.zeros(observation.shape[:-1] + (self.action_dim,), dtype=np.float32), state
 
@@ -28,7 +28,7 @@ def make_core(env_id: str, num_envs: int, **env_kwargs):
     return get_spec(env_id).make_core(num_envs, **env_kwargs)
 
 
-def run_episodes(core, policy, task_ids, progress=None, record: bool = False) -> dict:
+def run_episodes(core, policy, task_ids, progress: bool | None = None, record: bool = False) -> dict:
     """Run one episode per task id (all in one batch) until each ends; returns per-episode metrics.
 
     Args:

@@ -54,7 +54,7 @@ def projection_matrix(fov_y: float, aspect: float = 1.0, near: float = 1e-3, far
                                                farVal=float(far))
 
 
-def camera_matrices(p, R, fov_y, width, height, near=1e-3, far=0.3):
+def camera_matrices(p, R, fov_y, width: int, height: int, near=1e-3, far=0.3):
     """(view, projection) for getCameraImage: camera frame (p, R), vertical FOV ``fov_y`` (rad), image W x H."""
     return view_matrix(p, R), projection_matrix(fov_y, width / height, near, far)
 

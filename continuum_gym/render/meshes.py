@@ -17,7 +17,7 @@ E3 = np.array([0.0, 0.0, 1.0])
 class Mesh:
     """Triangle mesh: vertices (n, 3), normals (n, 3), triangles (m, 3) int, optional uvs (n, 2)."""
 
-    def __init__(self, V, N, T, uv=None):
+    def __init__(self, V, N, T, uv=None) -> None:
         self.V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
         N = np.asarray(N, dtype=np.float64).reshape(-1, 3)
         self.N = N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)

@@ -71,9 +71,9 @@ class OcclusionScene(Scene):
     cameras = CAMERAS_OCCLUSION
     robot_groups = ("robot",)
 
-    def __init__(self, robot=None, cone=None, tissue_distance=0.065, robot_radius=0.0015, n_per_segment=8,
+    def __init__(self, robot=None, cone=None, tissue_distance=0.065, robot_radius=0.0015, n_per_segment: int = 8,
                  shaft_radius=0.002, tissue="view", tissue_half_size=0.05, circular_fov=True, near=1e-3, far=0.3,
-                 external_camera=None, texture_seed=0, cache_background=True):
+                 external_camera=None, texture_seed=0, cache_background=True) -> None:
         from continuum_gym.robots import MultiBackboneRobot
 
         self.robot = MultiBackboneRobot() if robot is None else robot
@@ -219,7 +219,7 @@ class OcclusionScene(Scene):
             return self._external[0].copy(), self._external[1].copy()
         raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
 
-    def render(self, camera="external", width=128, height=128) -> np.ndarray:
+    def render(self, camera="external", width: int = 128, height: int = 128) -> np.ndarray:
         """RGB image (height, width, 3) uint8 from ``"external"`` or ``"endoscope"``."""
         if camera == "endoscope":
             return self._endoscope(width, height, False)[0]
@@ -227,7 +227,7 @@ class OcclusionScene(Scene):
             raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
         return self._external_image(width, height, {"robot", "shaft", "tissue", "tissue_frame", "cone"})
 
-    def endoscope_frame(self, width=128, height=128):
+    def endoscope_frame(self, width: int = 128, height: int = 128):
         """(endoscope RGB image (height, width, 3) uint8, pixel occlusion of that image size).
 
         With the cached background (``cache_background``, ``tissue="view"``) both come from one robot
@@ -291,7 +291,7 @@ class OcclusionScene(Scene):
             cached = self._backgrounds[key] = (rgb, depth)
         return cached
 
-    def segmentation(self, width=128, height=128, fov_only=False) -> np.ndarray:
+    def segmentation(self, width: int = 128, height: int = 128, fov_only=False) -> np.ndarray:
         """Boolean (height, width): endoscope-image pixels showing the robot.
 
         The tissue is hidden, so robot parts beyond it count as well. With ``fov_only`` only the pixels
@@ -305,7 +305,7 @@ class OcclusionScene(Scene):
                               segmentation=True)
         return self._robot_mask(seg)
 
-    def fov_mask(self, width=128, height=128) -> np.ndarray:
+    def fov_mask(self, width: int = 128, height: int = 128) -> np.ndarray:
         """Boolean (height, width): endoscope pixels whose ray is within beta of the view axis."""
         return fov_mask(int(width), int(height), self.fov_y, self.cone.beta)
 

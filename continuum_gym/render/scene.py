@@ -61,7 +61,7 @@ class Scene:
     _light = dict(lightAmbientCoeff=0.45, lightDiffuseCoeff=0.55, lightSpecularCoeff=0.08, shadow=0)
     _light_external = dict(lightAmbientCoeff=0.7, lightDiffuseCoeff=0.45, lightSpecularCoeff=0.08, shadow=0)
 
-    def __init__(self, texture_seed=0, texture_size=512, texture_features=1.0):
+    def __init__(self, texture_seed=0, texture_size=512, texture_features=1.0) -> None:
         p, bullet_client = import_pybullet()
         self._p = p
         self._client = bullet_client.BulletClient(connection_mode=p.DIRECT)
@@ -229,7 +229,7 @@ class Scene:
         if self.closed:
             raise RuntimeError(f"{type(self).__name__} is closed")
 
-    def close(self):
+    def close(self) -> None:
         """Disconnect the private pybullet client (idempotent)."""
         if getattr(self, "closed", True):
             return
@@ -255,14 +255,14 @@ class Scene:
             pass
 
 
-def resolution(width, height):
+def resolution(width: int, height: int):
     w, h = int(width), int(height)
     if w != width or h != height or w < 1 or h < 1 or w > 4096 or h > 4096:
         raise ValueError(f"width and height must be integers in [1, 4096]; got {width!r} x {height!r}")
     return w, h
 
 
-def corner_angle(fov_y, width, height):
+def corner_angle(fov_y, width: int, height: int):
     """Angle between the optical axis and the image corners' rays, plus 2 pixels of slack."""
     t = math.tan(0.5 * fov_y)
     return math.atan(t * math.hypot(1.0, width / height)) + 2.0 * fov_y / height

@@ -19,7 +19,7 @@ def _fractal(rng, size, slope, k_min=0.0, k_max=np.inf):
 
 
 @functools.lru_cache(maxsize=4)
-def cached_texture(size, seed, features):
+def cached_texture(size: int, seed: int, features):
     image = _tissue_texture(size, seed, features)
     image.flags.writeable = False
     return image

@@ -51,8 +51,8 @@ class ViewTrackingScene(Scene):
     robot_groups = ("endoscope",)
 
     def __init__(self, endoscope=None, davinci=None, frustum=None, endoscope_radius=0.003, davinci_radius=0.004,
-                 n_per_segment=6, tissue_height=None, tissue_half_size=1.0, near=1e-3, far=1.5,
-                 external_camera=None, texture_seed=0):
+                 n_per_segment: int = 6, tissue_height=None, tissue_half_size=1.0, near=1e-3, far=1.5,
+                 external_camera=None, texture_seed=0) -> None:
         from continuum_gym.geometry.frustum import Frustum
         from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
@@ -157,7 +157,7 @@ class ViewTrackingScene(Scene):
             return self._external[0].copy(), self._external[1].copy()
         raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
 
-    def render(self, camera="external", width=128, height=128) -> np.ndarray:
+    def render(self, camera="external", width: int = 128, height: int = 128) -> np.ndarray:
         """RGB image (height, width, 3) uint8 from ``"external"``, ``"endoscope"`` or ``"davinci"``."""
         p_cam, R_cam = self.camera_pose(camera)
         if camera == "external":

@@ -201,3 +201,23 @@ def test_sb3_adapter_infos_actions_and_registered_ids():
     frames = images.get_images()
     assert len(frames) == 2 and frames[0].ndim == 3
     images.close()
+
+
+def test_num_threads_is_checked_and_changes_no_result():
+    import numba
+
+    runs = []
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        venv = vector(OCCLUSION, n=64, task="random", num_threads=threads)
+        assert venv.unwrapped.core.num_threads == threads
+        venv.reset(seed=3)
+        rng = np.random.default_rng(0)
+        for _ in range(5):
+            obs, *_ = venv.step(rng.uniform(-1, 1, (64, 8)).astype(np.float32))
+        runs.append(obs)
+    np.testing.assert_array_equal(runs[0], runs[1])
+    # torch is loaded in this test process: the default leaves the cores to the learner.
+    assert vector(VIEW, n=64).unwrapped.core.num_threads == 1
+    for bad in (0, numba.config.NUMBA_NUM_THREADS + 1, 1.5, "2"):
+        with pytest.raises(ValueError, match="num_threads"):
+            vector(VIEW, n=4, num_threads=bad)

@@ -26,7 +26,7 @@ TASKS = tuple(task for tasks in ENV_TASKS.values() for task in tasks)
 
 
 # ====================================================================== CLI
-def resolve_tasks(env, task="all"):
+def resolve_tasks(env, task: str = "all"):
     """Tasks to run for an env id (or ``all``) and a task name (or ``all``); ValueError names the bad one."""
     valid_envs = (*ENV_TASKS, "all")
     if env not in valid_envs:

@@ -151,7 +151,7 @@ def _arc_minimum(robot, tracer, arc, intervals, cone, refine=True):
     return best
 
 
-def hold_optimum(robot, q0, limits, visibility=VISIBILITY, cone=None, step=TRACE_STEP, refine=True):
+def hold_optimum(robot, q0, limits, visibility=VISIBILITY, cone=None, step: int = TRACE_STEP, refine: bool = True):
     """Lowest VOI reachable while holding the tip pose of q0: self-motion arc x feasible gamma.
 
     The arc of the self-motion set that contains q0 within ``limits`` (:func:`trace_self_motion`) is
@@ -254,8 +254,8 @@ def _hold_job(job):
     return result
 
 
-def hold_study(n_starts=HOLD_N_STARTS, seed=HOLD_STARTS_SEED, limits=None, visibility=VISIBILITY, workers=2,
-               progress=True):
+def hold_study(n_starts: int = HOLD_N_STARTS, seed: int = HOLD_STARTS_SEED, limits=None, visibility=VISIBILITY, workers: int = 2,
+               progress: bool = True):
     """Hold optimum over ``sample_hold_starts(MultiBackboneRobot(), n_starts, default_rng(seed))``,
     against the projected gradient (``OcclusionLimits()``, 1500 steps, centring gamma from 0)."""
     robot = MultiBackboneRobot()
@@ -298,8 +298,8 @@ def hold_study(n_starts=HOLD_N_STARTS, seed=HOLD_STARTS_SEED, limits=None, visib
     }
 
 
-def circle_optimum(robot=None, task=None, limits=None, visibility=VISIBILITY, cone=None, sample_dt=CIRCLE_SAMPLE_DT,
-                   step=TRACE_STEP, progress=False):
+def circle_optimum(robot=None, task: str | None = None, limits=None, visibility=VISIBILITY, cone=None, sample_dt=CIRCLE_SAMPLE_DT,
+                   step: int = TRACE_STEP, progress: bool = False):
     """Time-connected lower bound of VOI along the circle (task b) within the limits.
 
     From psi_b (``task.start_configuration()``), the orientation held is FK(psi_b)'s. At each sampled time
@@ -378,8 +378,8 @@ def _project_inside(tracer, chain):
     raise RuntimeError("circle_optimum: no point of the previous arc projects within the limits")
 
 
-def env_hold_test_optimum(n_tasks=ENV_HOLD_TASKS, limits=None, visibility=VISIBILITY, workers=2, progress=True,
-                          robot=None, cone=None, split="test"):
+def env_hold_test_optimum(n_tasks=ENV_HOLD_TASKS, limits=None, visibility=VISIBILITY, workers: int = 2, progress: bool = True,
+                          robot=None, cone=None, split: str = "test"):
     """Hold optimum on the OcclusionAvoidance environment's held-out hold tasks (ids 0..n-1 of ``split``).
 
     These are the instances ``continuum-gym evaluate`` scores, so ``headroom_closed`` compares each

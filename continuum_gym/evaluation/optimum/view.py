@@ -221,8 +221,8 @@ def _optimise_view_point(job):
             "starts": {name: (q, -objective(wrap_view(q, lower, upper))) for name, q in job["starts"].items()}}
 
 
-def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, effort="standard", seed=OPTIMUM_SEED,
-                          workers=1, progress=False, baselines=True):
+def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, effort="standard", seed: int = OPTIMUM_SEED,
+                          workers: int = 1, progress: bool = False, baselines=True):
     """The largest overlap ratio reachable within the joint limits, for each da Vinci view.
 
     For each target view (the da Vinci camera frame of ``q_davinci``), maximises OR(F_dV, F_ct(q)) over
@@ -309,8 +309,8 @@ def _view_job_with_lsq(job):
     return _optimise_view_point(job)
 
 
-def coverage_optimum(grid=COVERAGE_GRID, workers=2, progress=True, global_check=GLOBAL_CHECK_SAMPLE,
-                     seed=OPTIMUM_SEED, robot=None, davinci=None, effort="standard"):
+def coverage_optimum(grid: int = COVERAGE_GRID, workers: int = 2, progress: bool = True, global_check=GLOBAL_CHECK_SAMPLE,
+                     seed: int = OPTIMUM_SEED, robot=None, davinci=None, effort="standard"):
     """Coverage of the paper's map (L_dV = 65 mm, roll 0, yaw/pitch in [-60, 60] deg, OR > 0.8).
 
     Returns a dict with the cache keys of ``coverage`` (percentages, mean OR, per-point OR maps of the

@@ -61,7 +61,7 @@ def single_threaded_blas():
             setter(count)
 
 
-def map_jobs(function, jobs, workers, progress, description):
+def map_jobs(function, jobs, workers: int, progress: bool, description):
     """Run ``function`` over ``jobs`` (in order), in ``workers`` processes, with a tqdm bar."""
     from tqdm.auto import tqdm
 
@@ -94,7 +94,7 @@ def positive_int(value, name: str) -> int:
     return integer(value, name, low=1)
 
 
-def grid_size(grid) -> int:
+def grid_size(grid: int) -> int:
     """Grid points per axis: an integer >= 2."""
     return integer(grid, "grid (points per axis)", low=2)
 
