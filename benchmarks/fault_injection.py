@@ -2,8 +2,8 @@
 
 For each algorithm: one uninterrupted reference run, then ``--kills`` trials. A trial starts
 ``continuum-gym train`` in a subprocess, SIGKILLs it (the whole process group) after a random delay
-drawn uniformly from [0.3 s, 1.1 x the reference's wall time] (so kills land before the first
-checkpoint, during training, inside checkpoint writes and after the end), then runs
+drawn uniformly from [0.3 s, 0.9 x the reference's wall time] (so kills land before the first
+checkpoint, during training and inside checkpoint writes; a delay past the end counts as not killed), then runs
 ``continuum-gym train --resume`` until it exits 0. Each trial must end with:
 
 * the full step count in the final model and in the newest checkpoint unit;
@@ -137,7 +137,7 @@ def main(argv=None) -> int:
                 # Odd trials die inside a checkpoint write (a random unit), even ones at a random moment.
                 units_total = total // BLOCKS[algo]["checkpoint_freq"]
                 in_write = int(rng.integers(1, units_total + 1)) if trial % 2 else None
-                delay = float(rng.uniform(0.3, 1.1 * reference_seconds))
+                delay = float(rng.uniform(0.3, 0.9 * reference_seconds))
                 code, _ = run(command(algo, out, hp, False, in_write), kill_after=None if in_write else delay)
                 run_dir = out / RUN.format(algo=algo)
                 units_at_kill = len(list((run_dir / "checkpoints").glob("step_*"))) if run_dir.exists() else 0
