@@ -91,7 +91,8 @@ if __name__ == "__main__":  # python benchmarks/numpy_reference_overlap.py: time
 
     from scipy.spatial.transform import Rotation
 
-    from continuum_gym.geometry.overlap import overlap_ratio, overlap_ratio_reference
+    from continuum_gym.geometry.overlap import overlap_ratio
+    from continuum_gym.geometry.overlap_reference import overlap_ratio_reference
 
     rng = np.random.default_rng(0)
     n = 4096

@@ -124,7 +124,7 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
         count: number of distinct instances (None: unbounded).
     """
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.envs.tasks import SampledTasks
+    from continuum_gym.envs.task_sources import SampledTasks
     from continuum_gym.envs.trajectories import DaVinciTrajectory, TipTrajectory
 
     env = _env(env)

@@ -181,7 +181,7 @@ class EnvConfig:
 def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
     from continuum_gym import registry
     from continuum_gym.envs.spec import ENV_SPECS
-    from continuum_gym.envs.tasks import resolve_task
+    from continuum_gym.envs.task_sources import resolve_task
 
     set_ = object.__setattr__
     source = resolve_task(config.task, config.env_id, tasks, config.env_id == OcclusionConfig.env_id)

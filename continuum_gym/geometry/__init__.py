@@ -16,10 +16,9 @@ from continuum_gym.geometry.lens_cone import (
     view_axis,
 )
 from continuum_gym.geometry.occlusion import occlusion_details, visual_occlusion_index
-from continuum_gym.geometry.overlap import (
-    overlap_ratio,
+from continuum_gym.geometry.overlap import overlap_ratio, overlap_ratio_nb
+from continuum_gym.geometry.overlap_reference import (
     overlap_ratio_monte_carlo,
-    overlap_ratio_nb,
     overlap_ratio_reference,
 )
 

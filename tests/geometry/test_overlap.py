@@ -13,10 +13,9 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from continuum_gym.geometry.frustum import FACE_VERTICES, Frustum
-from continuum_gym.geometry.overlap import (
-    overlap_ratio,
+from continuum_gym.geometry.overlap import overlap_ratio, overlap_ratio_nb
+from continuum_gym.geometry.overlap_reference import (
     overlap_ratio_monte_carlo,
-    overlap_ratio_nb,
     overlap_ratio_reference,
 )
 from tests.conftest import load_reference
