@@ -137,8 +137,9 @@ def _trainable(env_id, algo, base, steps, out, hp_file):
     return trainable
 
 
-def check_sweep_arguments(seeds, steps, cpus_per_trial, search, out) -> tuple[list[int], int | None, float]:
-    """(seeds, steps, cpus_per_trial) validated; the search file and ``out`` checked, else ``ValueError``."""
+def check_sweep_arguments(seeds, steps, cpus_per_trial, out) -> tuple[list[int], int | None, float]:
+    """(seeds, steps, cpus_per_trial) validated and ``out`` checked, else ``ValueError`` (``load_search``
+    checks the search file)."""
     if not isinstance(seeds, (list, tuple)) or not seeds:
         raise ValueError(f"seeds must be a non-empty list of whole numbers >= 0; got {seeds!r}")
     seeds = [seed_number("seeds", seed) for seed in seeds]
@@ -146,8 +147,6 @@ def check_sweep_arguments(seeds, steps, cpus_per_trial, search, out) -> tuple[li
         raise ValueError(f"seeds must be distinct; got {seeds}")
     steps = None if steps is None else whole_number("steps", steps)
     cpus = number(cpus_per_trial, "cpus_per_trial", low=0.0, high=1024.0, low_open=True)
-    if search is not None and not Path(search).is_file():
-        raise ValueError(f"search must be a search-space YAML file; {str(search)!r} does not exist")
     output_directory("out", out)
     return seeds, steps, cpus
 
@@ -159,7 +158,7 @@ def sweep(env_id: str, algo: str, base, seeds, steps=None, search=None, address=
     Every argument is checked before Ray starts: ``ValueError`` naming the parameter and its range.
     """
     validate(env_id, algo, base)
-    seeds, steps, cpus_per_trial = check_sweep_arguments(seeds, steps, cpus_per_trial, search, out)
+    seeds, steps, cpus_per_trial = check_sweep_arguments(seeds, steps, cpus_per_trial, out)
     search_spec = load_search(search, algo, env_id) if search else {"method": "grid", "num_samples": 1,
                                                                      "scheduler": "none", "asha": {}, "space": {}}
     try:

@@ -143,6 +143,18 @@ def add_reward_terms(i, slot, metrics, flags, actions, terms, first):
     return total
 
 
+@njit(cache=True, inline="always")
+def row_reward(i, terms, n_builtin, slot, metrics, flags, actions):
+    """Row ``i``'s reward: the sum of its ``n_builtin`` built-in terms, plus the registered compiled terms
+    of ``slot`` (written after them into ``terms``; ``slot`` None: none registered, the branch is pruned)."""
+    total = 0.0
+    for k in range(n_builtin):
+        total += terms[i, k]
+    if slot is not None:
+        total += add_reward_terms(i, slot, metrics, flags, actions, terms, n_builtin)
+    return total
+
+
 def controller_predict(controller, observation) -> np.ndarray:
     """A registered controller's command for a controller observation dict (as the built-in ``predict``)."""
     from continuum_gym.registry import OCCLUSION

@@ -32,7 +32,7 @@ from continuum_gym.envs.common_kernels import (
     desired_point,
     desired_rotation,
 )
-from continuum_gym.envs.custom import add_reward_terms
+from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.linalg import damped_gram_solve
@@ -342,12 +342,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     flags[i, FLAG_BASE_FROZEN] = base_frozen
     flags[i, FLAG_BASE_SATURATED] = base_saturated
     flags[i, FLAG_GUARDED] = guarded
-    total = 0.0
-    for k in range(N_TERMS_REWARD):
-        total += terms[i, k]
-    if terms_slot is not None:  # registered compiled terms, after the built-in ones
-        total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_TERMS_REWARD)
-    out.rewards[i] = total
+    out.rewards[i] = row_reward(i, terms, N_TERMS_REWARD, terms_slot, metrics, flags, actions)
 
 
 @njit(cache=True, nogil=True)

@@ -26,7 +26,7 @@ from continuum_gym.baselines.view_tracking import (
     view_rates_kernel,
 )
 from continuum_gym.envs.common_kernels import clip_observation, desired_point
-from continuum_gym.envs.custom import add_reward_terms
+from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.overlap import overlap_ratio_nb
 from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
@@ -198,12 +198,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
     flags[i, FLAG_RATE_SATURATED] = 1 if scale < 1.0 else 0
     flags[i, FLAG_TERMINATED] = 0 if math.isfinite(metrics[i, METRIC_POSITION_ERROR]) else 1
     flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
-    total = 0.0
-    for k in range(N_REWARD_TERMS):
-        total += terms[i, k]
-    if terms_slot is not None:  # registered compiled terms, after the built-in ones
-        total += add_reward_terms(i, terms_slot, metrics, flags, actions, terms, N_REWARD_TERMS)
-    out.rewards[i] = total
+    out.rewards[i] = row_reward(i, terms, N_REWARD_TERMS, terms_slot, metrics, flags, actions)
 
 
 @njit(cache=True, nogil=True)

@@ -24,6 +24,7 @@ Needs the ``[offline]`` extra (``pip install "continuum-gym[offline]"``: Minari 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 from pathlib import Path
@@ -140,16 +141,18 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
         if not overwrite:
             raise FileExistsError(f"dataset {name} exists under {minari_root()}; pass overwrite=True (--overwrite)")
         minari.delete_dataset(name)
-    kwargs = dataset_env_kwargs(controller, split, env_kwargs)
     buffers = collect_episodes(env_id, controller, split=split, episodes=episodes, noise=noise, seed=seed,
                                env_kwargs=env_kwargs, progress=progress)
-    env = gym.make(env_id, **kwargs)
+    # The spec the episodes were recorded with (recover_environment() rebuilds the env from it).
+    registered = gym.spec(env_id)
+    env_spec = dataclasses.replace(registered, kwargs={**registered.kwargs,
+                                                       **dataset_env_kwargs(controller, split, env_kwargs)})
     description = (f"{episodes} episodes of the {controller} baseline of {env_id} on task ids 0..{episodes - 1} of "
                    f"the {split} split" + (f", with Gaussian residuals of std {noise:g}" if noise else "")
                    + f"; seeds {seed}..{seed + episodes - 1}. Recorded by continuum-gym dataset.")
     try:
         dataset = minari.create_dataset_from_buffers(
-            dataset_id=name, buffer=buffers, env=env.spec, eval_env=env.spec, algorithm_name=controller,
+            dataset_id=name, buffer=buffers, env=env_spec, eval_env=env_spec, algorithm_name=controller,
             author="continuum-gym", author_email="continuum-gym@users.noreply.github.com",
             code_permalink="https://github.com/continuum-gym/continuum-gym", description=description,
             data_format="hdf5", requirements=["continuum-gym"])
@@ -157,8 +160,6 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
         if name in minari.list_local_datasets():
             minari.delete_dataset(name)
         raise
-    finally:
-        env.close()
     return dataset
 
 
