@@ -286,7 +286,7 @@ class BatchedCore:
 
     def reward_terms_row(self, row: int) -> RewardTerms:
         """The weighted reward terms of one row: (n_terms,), readable by term name (numpy scalars)."""
-        return RewardTerms(self.terms[row, :len(self.reward_names)], self.reward_names)
+        return RewardTerms.of_checked(self.terms[row, :len(self.reward_names)], self.reward_names)
 
     def sample_task_id(self, rng: np.random.Generator) -> int:
         return int(rng.integers(0, self.task_count))

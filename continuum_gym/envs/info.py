@@ -21,7 +21,9 @@ class InfoField:
     """An ``info`` entry: ``read(core)`` returns its (N, ...) values; ``scalar`` converts one row's value."""
 
     name: str
-    read: Callable[[Any], np.ndarray]  #: (N, ...) values; a reader with ``row(core, row)`` also reads one row
+    #: (N, ...) values; a reader with ``attribute`` and ``pick(source_row, core)`` also reads one row
+    #: from the row of its source array (shared with the other fields of that array)
+    read: Callable[[Any], np.ndarray]
     scalar: type | None = float
     doc: str = ""
 
@@ -36,8 +38,9 @@ class Column:
         values = getattr(core, self.attribute)[:, self.index]
         return values != 0 if self.kind is bool else values
 
-    def row(self, core, row: int) -> Any:
-        value = getattr(core, self.attribute)[row, self.index]
+    def pick(self, values: np.ndarray, core) -> Any:
+        """This field's value from one row of the source array (``values = source[row]``)."""
+        value = values[self.index]
         return value != 0 if self.kind is bool else value
 
 
@@ -51,9 +54,16 @@ class Bits:
         values = getattr(core, self.attribute)[:, self.index]
         return ((values[:, None] >> np.arange(core.dof)) & 1).astype(bool)
 
-    def row(self, core, row: int) -> np.ndarray:
-        value = int(getattr(core, self.attribute)[row, self.index])
-        return np.array([(value >> k) & 1 for k in range(core.dof)], dtype=bool)
+    def pick(self, values: np.ndarray, core) -> np.ndarray:
+        mask = int(values[self.index])
+        dof = core.dof
+        table = _BIT_TABLES.get(dof)
+        if table is None:  # every mask of dof bits, unpacked once: a row's read is then one copy
+            table = _BIT_TABLES[dof] = ((np.arange(1 << dof)[:, None] >> np.arange(dof)) & 1).astype(bool)
+        return table[mask].copy()
+
+
+_BIT_TABLES: dict[int, np.ndarray] = {}
 
 
 class Attribute:
@@ -68,8 +78,12 @@ class Attribute:
             value = getattr(value, part)
         return value
 
-    def row(self, core, row: int) -> Any:
-        return self(core)[row]
+    @property
+    def attribute(self) -> str:
+        return ".".join(self.path)
+
+    def pick(self, values: Any, core) -> Any:
+        return values
 
 
 class AtMost:
@@ -81,8 +95,8 @@ class AtMost:
     def __call__(self, core) -> np.ndarray:
         return getattr(core, self.attribute)[:, self.index] <= self.bound
 
-    def row(self, core, row: int) -> Any:
-        return getattr(core, self.attribute)[row, self.index] <= self.bound
+    def pick(self, values: np.ndarray, core) -> Any:
+        return values[self.index] <= self.bound
 
 
 def column(attribute: str, index: int, kind: type = float) -> Column:
@@ -113,11 +127,50 @@ NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
 def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
     """{name: value} of one row: numpy scalars for scalar fields, fresh arrays for the others."""
     out = {}
-    for f in fields:
-        read_row = getattr(f.read, "row", None)  # one element, not the whole batch's column
-        value = read_row(core, row) if read_row is not None else f.read(core)[row]
-        out[f.name] = np.array(value) if f.scalar is None else NUMPY_SCALARS[f.scalar](value)
+    rows = {}  # each source array's row, read once for all the fields that come from it
+    for name, source, pick, kind in _row_plan(fields):
+        if source is None:  # a reader without ``pick``: the whole batch, indexed
+            value = pick(core)[row]
+        else:
+            values = rows.get(source)
+            if values is None:
+                values = rows[source] = _read_source(core, source)[row]
+            value = pick(values, core)
+        if kind is None:
+            out[name] = np.array(value)
+        else:  # most reads already give the numpy scalar (float64 columns, int64 counters): no conversion
+            out[name] = value if type(value) is kind else kind(value)
     return out
+
+
+def _read_source(core, source: str) -> Any:
+    value = core
+    for part in source.split("."):
+        value = getattr(value, part)
+    return value
+
+
+_ROW_PLANS: dict[int, tuple] = {}
+
+
+def _row_plan(fields: Sequence[InfoField]) -> tuple:
+    """(name, source array, pick from its row, numpy scalar type or None) per field, worked out once.
+
+    The single env builds ``info`` every step, where looking readers up and reading each field's
+    array separately cost more than the values themselves. A reader without ``pick`` reads the
+    whole batch and indexes the row.
+    """
+    plan = _ROW_PLANS.get(id(fields))
+    if plan is None or plan[0] is not fields:
+        entries = []
+        for f in fields:
+            kind = None if f.scalar is None else NUMPY_SCALARS[f.scalar]
+            if hasattr(f.read, "pick"):
+                entries.append((f.name, f.read.attribute, f.read.pick, kind))
+            else:
+                entries.append((f.name, None, f.read, kind))
+        plan = _ROW_PLANS[id(fields)] = (fields, tuple(entries))
+    return plan[1]
 
 
 def fields_table(fields: Sequence[InfoField]) -> str:
@@ -143,6 +196,13 @@ class RewardTerms(np.ndarray):
             raise ValueError(f"reward terms: last axis must have {len(names)} entries (names {tuple(names)}); "
                              f"got shape {terms.shape}")
         terms.names = tuple(names)
+        return terms
+
+    @classmethod
+    def of_checked(cls, values: np.ndarray, names: tuple[str, ...]) -> RewardTerms:
+        """A copy of float64 ``values`` whose last axis is already known to match ``names`` (a core's own rows)."""
+        terms = values.copy().view(cls)
+        terms.names = names
         return terms
 
     def __array_finalize__(self, source) -> None:

@@ -15,9 +15,10 @@ import numpy as np
 from numba import njit
 
 from continuum_gym.robots.segment import (
+    bend_rotation,
+    bend_terms,
     segment_jacobian,
-    segment_position,
-    segment_rotation,
+    segment_position_cs,
 )
 
 HALF_PI = 0.5 * math.pi
@@ -61,8 +62,14 @@ def frames(q, robot, ws):
     for j in range(n):
         bend = HALF_PI - q[2 * j]
         delta = q[2 * j + 1]
-        segment_position(bend, delta, robot.lengths[j], p_local)
-        segment_rotation(bend, delta, Q)
+        s, omc, a, b, _, _ = bend_terms(bend)  # once for the position and the rotation
+        cd = math.cos(delta)
+        sd = math.sin(delta)
+        length = robot.lengths[j]
+        p_local[0] = length * cd * a
+        p_local[1] = -length * sd * a
+        p_local[2] = length * b
+        bend_rotation(s, omc, cd, sd, Q)
         for a in range(3):
             acc = g_base[j, a]
             for b in range(3):
@@ -136,9 +143,16 @@ def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
 @njit(cache=True)
 def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
+    delta = q[2 * segment + 1]
+    body_point_cs(q, robot, ws, segment, sigma, math.cos(delta), math.sin(delta), out)
+
+
+@njit(cache=True)
+def body_point_cs(q, robot, ws, segment, sigma, cd, sd, out):
+    """``body_point`` given cos and sin of the segment's delta (shared by all its samples)."""
     R_base, g_base, p_local = ws.R_base, ws.g_base, ws.p_local
     bend = HALF_PI - q[2 * segment]
-    segment_position(sigma * bend, q[2 * segment + 1], sigma * robot.lengths[segment], p_local)
+    segment_position_cs(sigma * bend, cd, sd, sigma * robot.lengths[segment], p_local)
     for a in range(3):
         acc = g_base[segment, a]
         for b in range(3):
@@ -223,8 +237,10 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
         idx += 1
     for j in range(n):
         start = 0 if j == 0 else 1
+        cd = math.cos(q[2 * j + 1])
+        sd = math.sin(q[2 * j + 1])
         for k in range(start, n_per_segment + 1):
-            body_point(q, robot, ws, j, k / n_per_segment, out[idx])
+            body_point_cs(q, robot, ws, j, k / n_per_segment, cd, sd, out[idx])
             idx += 1
 
 

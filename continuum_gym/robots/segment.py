@@ -66,9 +66,13 @@ def bend_rotation(s, omc, cd, sd, R):
 @njit(cache=True, inline="always")
 def segment_position(bend, delta, length, out):
     """End-disk position in the segment base frame (m): eq (8) of paper 000 / eq (3) of paper 001."""
+    segment_position_cs(bend, math.cos(delta), math.sin(delta), length, out)
+
+
+@njit(cache=True, inline="always")
+def segment_position_cs(bend, cd, sd, length, out):
+    """``segment_position`` given cos and sin of delta: the backbone samples of one segment share them."""
     _, _, a, b, _, _ = bend_terms(bend)
-    cd = math.cos(delta)
-    sd = math.sin(delta)
     out[0] = length * cd * a
     out[1] = -length * sd * a
     out[2] = length * b
@@ -91,8 +95,13 @@ def segment_jacobian(bend, delta, length, sigma, jv, jw):
     (d bend_sigma / d bend = sigma). ``jv`` and ``jw`` are (3, 2).
     """
     s, omc, a, _, da, db = bend_terms(sigma * bend)
-    cd = math.cos(delta)
-    sd = math.sin(delta)
+    segment_jacobian_terms(s, omc, a, da, db, math.cos(delta), math.sin(delta), length, sigma, jv, jw)
+
+
+@njit(cache=True, inline="always")
+def segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, sigma, jv, jw):
+    """``segment_jacobian`` from the bend terms at sigma * bend and cos / sin of delta (computed once by
+    a caller that also needs them for the pose)."""
     ls = sigma * length
     ls2 = sigma * ls
     jv[0, 0] = ls2 * cd * da
