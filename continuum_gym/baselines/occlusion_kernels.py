@@ -15,7 +15,7 @@ from numba import njit
 
 from continuum_gym.geometry.force_field import potential_gradient_kernel
 from continuum_gym.geometry.lens_cone import centre_distance_kernel
-from continuum_gym.robots.linalg import cholesky_solve_inplace, gram_matrix
+from continuum_gym.robots.linalg import twist_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 
@@ -123,14 +123,13 @@ def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     frozen_bits = 0
     for _ in range(dof + 1):
         # (J M J^T + eps I) [y_task, y_back] = [xi, J M grad]: the damped inverse of eq (23) on the active joints
-        gram_matrix(J, mask, prm.epsilon, A)
         for a in range(6):
             B[a, 0] = xi[a]
             acc = 0.0
             for k in range(dof):
                 acc += J[a, k] * mask[k] * grad[k]
             B[a, 1] = acc
-        cholesky_solve_inplace(A, B)
+        twist_gram_solve(J, mask, prm.epsilon, A, B)
         for k in range(dof):
             if mask[k] == 0.0:
                 qdot[k] = 0.0

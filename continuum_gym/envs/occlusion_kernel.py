@@ -35,7 +35,7 @@ from continuum_gym.envs.common_kernels import (
 from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
-from continuum_gym.robots.linalg import damped_gram_solve
+from continuum_gym.robots.linalg import twist_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 
@@ -112,7 +112,7 @@ def project_nullspace(J, r, work, out):
             acc += J[a, k] * r[k]
         B[a, 0] = acc
         B[a, 1] = 0.0
-    damped_gram_solve(J, work.ones, NULLSPACE_DAMPING, A, B)
+    twist_gram_solve(J, work.ones, NULLSPACE_DAMPING, A, B)
     for k in range(dof):
         acc = 0.0
         for a in range(6):

@@ -16,11 +16,11 @@ import numpy as np
 from numba import njit
 
 from continuum_gym.geometry.lens_cone import (
-    cone_distance_slant,
-    lens_to_world_direction,
+    cone_distance_slant_cs,
+    lens_to_world_direction_cs,
     points_and_gamma,
     resolve_cone,
-    to_lens,
+    to_lens_cs,
 )
 from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
 from continuum_gym.robots.mbcr_kernels import all_finite, make_workspace, points_kernel
@@ -83,14 +83,19 @@ def force_kernel(px, py, pz, gamma, cone, field):
 
     ``cone`` and ``field`` are the ``kernel_args()`` of a ``LensCone`` and a ``ForceField``.
     """
-    xl, yl, zl = to_lens(px, py, pz, gamma, cone.d_o, cone.alpha, cone.model)
-    d, r, rho = cone_distance_slant(xl, yl, zl, cone.beta)
+    return force_kernel_cs(px, py, pz, math.cos(gamma), math.sin(gamma), math.cos(cone.alpha), math.sin(cone.alpha),
+                           math.cos(cone.beta), math.sin(cone.beta), cone, field)
+
+
+@njit(cache=True, inline="always")
+def force_kernel_cs(px, py, pz, cg, sg, ca, sa, cb, sb, cone, field):
+    """``force_kernel`` with cos/sin of gamma, alpha and beta precomputed: the same for every point of a robot."""
+    xl, yl, zl = to_lens_cs(px, py, pz, cg, sg, ca, sa, cone.d_o, cone.model)
+    d, r, rho = cone_distance_slant_cs(xl, yl, zl, cb, sb)
     if d > field.d0 or r < VERTEX_EPS or rho < AXIS_EPS:
         return 0.0, 0.0, 0.0
     magnitude = field.f_star * (field.r_star / r) ** field.q * (1.0 - d / field.d0) ** (2.0 * field.p)
-    cb = math.cos(cone.beta)
-    sb = math.sin(cone.beta)
-    fx, fy, fz = lens_to_world_direction(xl * cb / rho, yl * cb / rho, -sb, gamma, cone.alpha)
+    fx, fy, fz = lens_to_world_direction_cs(xl * cb / rho, yl * cb / rho, -sb, cg, sg, ca, sa)
     return magnitude * fx, magnitude * fy, magnitude * fz
 
 
@@ -103,8 +108,11 @@ def potential_gradient_kernel(q, robot, ws, segments, fractions, P, JV, gamma, c
         grad[k] = 0.0
     for j in range(robot.lengths.shape[0]):
         grad[2 * j] = -robot.stiffness[j] * (0.5 * math.pi - q[2 * j])
+    cg, sg = math.cos(gamma), math.sin(gamma)
+    ca, sa = math.cos(cone.alpha), math.sin(cone.alpha)
+    cb, sb = math.cos(cone.beta), math.sin(cone.beta)
     for i in range(segments.shape[0]):
-        fx, fy, fz = force_kernel(P[i, 0], P[i, 1], P[i, 2], gamma, cone, field)
+        fx, fy, fz = force_kernel_cs(P[i, 0], P[i, 1], P[i, 2], cg, sg, ca, sa, cb, sb, cone, field)
         if fx == 0.0 and fy == 0.0 and fz == 0.0:
             continue
         for k in range(dof):

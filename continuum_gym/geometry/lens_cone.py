@@ -109,10 +109,13 @@ def to_lens(px, py, pz, gamma, d_o, alpha, model):
 @njit(cache=True, inline="always")
 def lens_to_world_direction(vx, vy, vz, gamma, alpha):
     """Direction from {lens} to {w}: (^{lens}R_w)^T v = Rz(gamma) Ry(-alpha) v."""
-    ca = math.cos(alpha)
-    sa = math.sin(alpha)
-    cg = math.cos(gamma)
-    sg = math.sin(gamma)
+    return lens_to_world_direction_cs(vx, vy, vz, math.cos(gamma), math.sin(gamma), math.cos(alpha),
+                                      math.sin(alpha))
+
+
+@njit(cache=True, inline="always")
+def lens_to_world_direction_cs(vx, vy, vz, cg, sg, ca, sa):
+    """``lens_to_world_direction`` with cos/sin of gamma and alpha precomputed."""
     ux = ca * vx - sa * vz
     uz = sa * vx + ca * vz
     return cg * ux - sg * vy, sg * ux + cg * vy, uz
@@ -121,9 +124,13 @@ def lens_to_world_direction(vx, vy, vz, gamma, alpha):
 @njit(cache=True, inline="always")
 def cone_distance_slant(xl, yl, zl, beta):
     """(d, r, rho) of a point in {lens}: eqs (16)-(17); rho = sqrt(x_l^2 + y_l^2)."""
+    return cone_distance_slant_cs(xl, yl, zl, math.cos(beta), math.sin(beta))
+
+
+@njit(cache=True, inline="always")
+def cone_distance_slant_cs(xl, yl, zl, cb, sb):
+    """``cone_distance_slant`` with cos/sin of the half-angle beta precomputed (loops over many points)."""
     rho = math.sqrt(xl * xl + yl * yl)
-    cb = math.cos(beta)
-    sb = math.sin(beta)
     return cb * rho - sb * zl, sb * rho + cb * zl, rho
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from continuum_gym.geometry.lens_cone import (
-    cone_distance_slant,
+    cone_distance_slant_cs,
     resolve_cone,
     to_lens_cs,
 )
@@ -46,12 +46,14 @@ def voi_kernel(points, gamma, cone, lens, dr):
     sg = math.sin(gamma)
     ca = math.cos(alpha)
     sa = math.sin(alpha)
+    cb = math.cos(beta)
+    sb = math.sin(beta)
     for i in range(m):
         xl, yl, zl = to_lens_cs(points[i, 0], points[i, 1], points[i, 2], cg, sg, ca, sa, d_o, model)
         lens[i, 0] = xl
         lens[i, 1] = yl
         lens[i, 2] = zl
-        d, r, _ = cone_distance_slant(xl, yl, zl, beta)
+        d, r, _ = cone_distance_slant_cs(xl, yl, zl, cb, sb)
         dr[i, 0] = d
         dr[i, 1] = r
     r_max = dr[m - 1, 1]
@@ -72,7 +74,7 @@ def voi_kernel(points, gamma, cone, lens, dr):
         ex = lens[0, 0]
         ey = lens[0, 1]
         ez = lens[0, 2]
-    _, r_e, _ = cone_distance_slant(ex, ey, ez, beta)
+    _, r_e, _ = cone_distance_slant_cs(ex, ey, ez, cb, sb)
     if r_e >= r_max:
         return 0.0, 0.0, r_e, r_max
     nu = -1.0

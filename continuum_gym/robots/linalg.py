@@ -13,16 +13,23 @@ import math
 
 from numba import njit
 
-__all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve"]
+__all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve", "twist_gram_solve"]
 
 
 @njit(cache=True)
 def gram_matrix(J, mask, damping, out):
     """out (r x r) = J diag(mask) J^T + damping I for J (r x n) and mask (n,) (1.0 keeps a column)."""
-    for a in range(out.shape[0]):
+    gram_matrix_sized(J, mask, damping, out, out.shape[0], J.shape[1])
+
+
+@njit(cache=True, inline="always")
+def gram_matrix_sized(J, mask, damping, out, r, n):
+    """``gram_matrix`` with the sizes passed: a caller that passes a constant r (the 6 rows of a twist)
+    lets the compiler unroll those loops after inlining (same operations, same order)."""
+    for a in range(r):
         for b in range(a + 1):
             acc = 0.0
-            for k in range(J.shape[1]):
+            for k in range(n):
                 acc += J[a, k] * J[b, k] * mask[k]
             out[a, b] = acc
             out[b, a] = acc
@@ -36,7 +43,12 @@ def cholesky_solve_inplace(A, B):
     Small dense systems (6 x 6 damped Gram matrices) are faster here than a LAPACK call.
     Returns False if A is not numerically positive definite.
     """
-    n = A.shape[0]
+    return cholesky_solve_sized(A, B, A.shape[0], B.shape[1])
+
+
+@njit(cache=True, inline="always")
+def cholesky_solve_sized(A, B, n, m):
+    """``cholesky_solve_inplace`` with the sizes passed (constants from the caller unroll the loops)."""
     for j in range(n):
         s = A[j, j]
         for k in range(j):
@@ -50,7 +62,6 @@ def cholesky_solve_inplace(A, B):
             for k in range(j):
                 s -= A[i, k] * A[j, k]
             A[i, j] = s / ljj
-    m = B.shape[1]
     for col in range(m):
         for i in range(n):
             s = B[i, col]
@@ -73,3 +84,10 @@ def damped_gram_solve(J, mask, damping, A, B):
     """
     gram_matrix(J, mask, damping, A)
     return cholesky_solve_inplace(A, B)
+
+
+@njit(cache=True, inline="always")
+def twist_gram_solve(J, mask, damping, A, B):
+    """``damped_gram_solve`` for a 6-row (twist) Jacobian and a 6 x 2 right-hand side: sizes fixed at compile time."""
+    gram_matrix_sized(J, mask, damping, A, 6, J.shape[1])
+    return cholesky_solve_sized(A, B, 6, 2)
