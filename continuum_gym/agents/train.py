@@ -214,6 +214,26 @@ def _starting_point(run_dir: Path, resume: bool, total: int):
     return None, False
 
 
+def learner_threads() -> dict:
+    """Set this training process's torch and numba thread counts; returns them (recorded in config.yml).
+
+    One of each, whatever the cores: a trainer alternates env steps and gradient steps, never both at
+    once, the networks are small (two layers of 64-256 units, batches of 64-256), and a second intra-op
+    thread costs more in synchronisation than it gains: benchmarks/training.py measures SAC, TD3 and
+    PPO with 1 and 2 torch threads, and two runs at once (each then keeps its own core; ``--parallel``
+    and ``sweep`` run one process per run). The vector env steps its rows on the calling thread.
+    """
+    import os
+
+    import numba
+    import torch
+
+    torch.set_num_threads(1)
+    numba.set_num_threads(1)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return {"torch": torch.get_num_threads(), "numba": numba.get_num_threads(), "cores_visible": cores}
+
+
 def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, steps=None, out="runs", resume: bool = False,
           hyperparams=None, progress: bool = True, command=None, n_envs=None, report=None) -> Path:
     """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base.
@@ -236,9 +256,6 @@ def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, ste
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
     run = {**RUN_DEFAULTS, **hp}
-    import numba
-    import torch
-
     from continuum_gym.agents.checkpoint import (
         CHECKPOINTS,
         clean_temporary,
@@ -248,9 +265,7 @@ def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, ste
     )
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
 
-    # Runs are parallelised by process (--parallel); one thread each keeps them from fighting.
-    torch.set_num_threads(1)
-    numba.set_num_threads(1)
+    threads = learner_threads()
     env_kwargs = dict(run["env_kwargs"] or {})
     env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
     try:  # the environment checks its own keywords; still nothing written
@@ -270,7 +285,7 @@ def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, ste
         config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
                   "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
                   "env_config": _base_vec_env(venv).core.config.to_dict(), "continuum_gym_version": _version(),
-                  "git_commit": _git_commit(), "python": sys.version.split()[0]}
+                  "git_commit": _git_commit(), "python": sys.version.split()[0], "threads": threads}
         write_text_atomic(run_dir / "config.yml", yaml.safe_dump(config, sort_keys=False))
         start = f"resume from step {unit.step}" if unit is not None else "step 0"
         write_text_atomic(run_dir / "args.yml", yaml.safe_dump({"env": env_id, "algo": algo, "base": base or "none",

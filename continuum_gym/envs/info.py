@@ -21,7 +21,7 @@ class InfoField:
     """An ``info`` entry: ``read(core)`` returns its (N, ...) values; ``scalar`` converts one row's value."""
 
     name: str
-    #: (N, ...) values; a reader with ``attribute`` and ``pick(source_row, core)`` also reads one row
+    #: (N, ...) values; a reader with ``attribute`` and ``expression(row_name)`` also reads one row
     #: from the row of its source array (shared with the other fields of that array)
     read: Callable[[Any], np.ndarray]
     scalar: type | None = float
@@ -38,10 +38,9 @@ class Column:
         values = getattr(core, self.attribute)[:, self.index]
         return values != 0 if self.kind is bool else values
 
-    def pick(self, values: np.ndarray, core) -> Any:
-        """This field's value from one row of the source array (``values = source[row]``)."""
-        value = values[self.index]
-        return value != 0 if self.kind is bool else value
+    def expression(self, row: str) -> str:
+        """Python expression of this field's value, given the name of one row of the source array."""
+        return f"({row}[{self.index}] != 0)" if self.kind is bool else f"{row}[{self.index}]"
 
 
 class Bits:
@@ -54,13 +53,10 @@ class Bits:
         values = getattr(core, self.attribute)[:, self.index]
         return ((values[:, None] >> np.arange(core.dof)) & 1).astype(bool)
 
-    def pick(self, values: np.ndarray, core) -> np.ndarray:
-        mask = int(values[self.index])
-        dof = core.dof
-        table = _BIT_TABLES.get(dof)
-        if table is None:  # every mask of dof bits, unpacked once: a row's read is then one copy
-            table = _BIT_TABLES[dof] = ((np.arange(1 << dof)[:, None] >> np.arange(dof)) & 1).astype(bool)
-        return table[mask].copy()
+    fresh = True  # its row value is a new array already
+
+    def expression(self, row: str) -> str:
+        return f"_bits({row}[{self.index}], core.dof)"
 
 
 _BIT_TABLES: dict[int, np.ndarray] = {}
@@ -82,8 +78,8 @@ class Attribute:
     def attribute(self) -> str:
         return ".".join(self.path)
 
-    def pick(self, values: Any, core) -> Any:
-        return values
+    def expression(self, row: str) -> str:
+        return row
 
 
 class AtMost:
@@ -95,8 +91,8 @@ class AtMost:
     def __call__(self, core) -> np.ndarray:
         return getattr(core, self.attribute)[:, self.index] <= self.bound
 
-    def pick(self, values: np.ndarray, core) -> Any:
-        return values[self.index] <= self.bound
+    def expression(self, row: str) -> str:
+        return f"({row}[{self.index}] <= {float(self.bound)!r})"
 
 
 def column(attribute: str, index: int, kind: type = float) -> Column:
@@ -126,51 +122,66 @@ NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
 
 def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
     """{name: value} of one row: numpy scalars for scalar fields, fresh arrays for the others."""
-    out = {}
-    rows = {}  # each source array's row, read once for all the fields that come from it
-    for name, source, pick, kind in _row_plan(fields):
-        if source is None:  # a reader without ``pick``: the whole batch, indexed
-            value = pick(core)[row]
-        else:
-            values = rows.get(source)
-            if values is None:
-                values = rows[source] = _read_source(core, source)[row]
-            value = pick(values, core)
-        if kind is None:
-            out[name] = np.array(value)
-        else:  # most reads already give the numpy scalar (float64 columns, int64 counters): no conversion
-            out[name] = value if type(value) is kind else kind(value)
-    return out
+    return _row_reader(fields, core)(core, row)
 
 
-def _read_source(core, source: str) -> Any:
-    value = core
-    for part in source.split("."):
-        value = getattr(value, part)
-    return value
+_ROW_READERS: dict[int, tuple] = {}
 
 
-_ROW_PLANS: dict[int, tuple] = {}
+def _row_reader(fields: Sequence[InfoField], core) -> Callable:
+    """A function ``(core, row) -> info dict`` written out for ``fields``, made once per field list.
 
-
-def _row_plan(fields: Sequence[InfoField]) -> tuple:
-    """(name, source array, pick from its row, numpy scalar type or None) per field, worked out once.
-
-    The single env builds ``info`` every step, where looking readers up and reading each field's
-    array separately cost more than the values themselves. A reader without ``pick`` reads the
-    whole batch and indexes the row.
+    The single env builds ``info`` every step; a loop over the fields that resolves each reader cost
+    more than the values themselves (15 fields: ~8 us against ~2 us for the dict written out, the way
+    ``dataclasses`` writes ``__init__``). Each source array's row is read once. Readers with
+    ``expression`` say how their value is read from that row; others are called on the whole batch.
+    A value whose type is not the field's numpy scalar type on the first call gets a conversion.
     """
-    plan = _ROW_PLANS.get(id(fields))
-    if plan is None or plan[0] is not fields:
-        entries = []
-        for f in fields:
-            kind = None if f.scalar is None else NUMPY_SCALARS[f.scalar]
-            if hasattr(f.read, "pick"):
-                entries.append((f.name, f.read.attribute, f.read.pick, kind))
-            else:
-                entries.append((f.name, None, f.read, kind))
-        plan = _ROW_PLANS[id(fields)] = (fields, tuple(entries))
-    return plan[1]
+    cached = _ROW_READERS.get(id(fields))
+    if cached is not None and cached[0] is fields:
+        return cached[1]
+    reader = _write_row_reader(fields, convert=set())
+    sample = reader(core, 0)
+    convert = {f.name for f in fields if f.scalar is not None and type(sample[f.name]) is not NUMPY_SCALARS[f.scalar]}
+    if convert:
+        reader = _write_row_reader(fields, convert)
+    _ROW_READERS[id(fields)] = (fields, reader)
+    return reader
+
+
+def _write_row_reader(fields: Sequence[InfoField], convert: set) -> Callable:
+    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bit_row}
+    sources: dict[str, str] = {}
+    lines = []
+    entries = []
+    for k, f in enumerate(fields):
+        read = f.read
+        if hasattr(read, "expression"):
+            source = sources.get(read.attribute)
+            if source is None:
+                source = sources[read.attribute] = f"s{len(sources)}"
+                lines.append(f"    {source} = core.{read.attribute}[row]")
+            expression = read.expression(source)
+        else:
+            namespace[f"_read{k}"] = read
+            expression = f"_read{k}(core)[row]"
+        if f.scalar is None and not getattr(read, "fresh", False):
+            expression = f"_array({expression})"
+        elif f.name in convert:
+            namespace[f"_kind{k}"] = NUMPY_SCALARS[f.scalar]
+            expression = f"_kind{k}({expression})"
+        entries.append(f"        {f.name!r}: {expression},")
+    source = "\n".join(["def info_row(core, row):", *lines, "    return {", *entries, "    }"])
+    exec(compile(source, "<continuum_gym info_row>", "exec"), namespace)  # noqa: S102 - our own field list
+    return namespace["info_row"]
+
+
+def _bit_row(mask, dof: int) -> np.ndarray:
+    """The (dof,) bools of a joint bit mask (a fresh array)."""
+    table = _BIT_TABLES.get(dof)
+    if table is None:  # every mask of dof bits, unpacked once: a row's read is then one copy
+        table = _BIT_TABLES[dof] = ((np.arange(1 << dof)[:, None] >> np.arange(dof)) & 1).astype(bool)
+    return table[int(mask)].copy()
 
 
 def fields_table(fields: Sequence[InfoField]) -> str:

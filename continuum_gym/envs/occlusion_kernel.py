@@ -163,11 +163,12 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     sub_dt = control_dt / env.substeps
     t = state.steps[i] * control_dt
     scratch = work.scratch
-    p_des = np.empty(3)
-    v_des = np.empty(3)
+    # The step's scratch: the substeps that used it are done (no allocation per observation)
+    p_des = work.p_des
+    v_des = work.v_des
     desired_point(tasks, i, t, p_des, v_des)
     R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
-    qdot = np.empty(dof)
+    qdot = work.qdot
     base_cmd = out.base_cmd
     if env.has_base and custom is not None:
         custom.rates[0](q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, custom.params, work.full_cmd)
@@ -192,8 +193,8 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
         out.base_info[i, BASE_SATURATED] = 0
     p = scratch.p
     R = scratch.R
-    e_w = np.empty(3)
-    orientation_error(R_des, R, np.empty((3, 3)), e_w)
+    e_w = scratch.e_w  # the baseline's evaluation above is done with it
+    orientation_error(R_des, R, scratch.work33, e_w)
     e_p0 = p_des[0] - p[0]
     e_p1 = p_des[1] - p[1]
     e_p2 = p_des[2] - p[2]
