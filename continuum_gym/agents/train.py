@@ -215,23 +215,24 @@ def _starting_point(run_dir: Path, resume: bool, total: int):
 
 
 def learner_threads() -> dict:
-    """Set this training process's torch and numba thread counts; returns them (recorded in config.yml).
+    """Set this training process's torch thread count; returns the thread use (recorded in config.yml).
 
-    One of each, whatever the cores: a trainer alternates env steps and gradient steps, never both at
-    once, the networks are small (two layers of 64-256 units, batches of 64-256), and a second intra-op
-    thread costs more in synchronisation than it gains: benchmarks/training.py measures SAC, TD3 and
-    PPO with 1 and 2 torch threads, and two runs at once (each then keeps its own core; ``--parallel``
-    and ``sweep`` run one process per run). The vector env steps its rows on the calling thread.
+    One torch thread, whatever the cores: a trainer alternates env steps and gradient steps, never
+    both at once, on small networks (two layers of 64-256 units, batches of 64-256), and ``--parallel``
+    and ``sweep`` run one process per run, each of which then has a core of its own. A second thread
+    buys a single run little or nothing (benchmarks/training.py: SAC 103 against 90 gradient steps/s,
+    PPO 10,200 against 12,100 env steps/s). The vector env steps on the calling thread (its default
+    when torch is loaded). numba's own threading layer is left unstarted: started (as
+    ``numba.set_num_threads`` does) its OpenMP pool cost two SAC runs side by side a third of their
+    speed (61 / 62 against 119 / 92 gradient steps/s).
     """
     import os
 
-    import numba
     import torch
 
     torch.set_num_threads(1)
-    numba.set_num_threads(1)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {"torch": torch.get_num_threads(), "numba": numba.get_num_threads(), "cores_visible": cores}
+    return {"torch": torch.get_num_threads(), "cores_visible": cores}
 
 
 def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, steps=None, out="runs", resume: bool = False,
@@ -285,7 +286,8 @@ def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, ste
         config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
                   "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
                   "env_config": _base_vec_env(venv).core.config.to_dict(), "continuum_gym_version": _version(),
-                  "git_commit": _git_commit(), "python": sys.version.split()[0], "threads": threads}
+                  "git_commit": _git_commit(), "python": sys.version.split()[0],
+                  "threads": {**threads, "env_step_threads": _base_vec_env(venv).core.num_threads}}
         write_text_atomic(run_dir / "config.yml", yaml.safe_dump(config, sort_keys=False))
         start = f"resume from step {unit.step}" if unit is not None else "step 0"
         write_text_atomic(run_dir / "args.yml", yaml.safe_dump({"env": env_id, "algo": algo, "base": base or "none",

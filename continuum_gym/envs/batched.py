@@ -73,7 +73,16 @@ def step_threads(num_threads=None) -> int:
     import numba
 
     if num_threads is None:
-        return 1 if "torch" in sys.modules else numba.get_num_threads()
+        if "torch" in sys.modules:
+            return 1
+        # numba.get_num_threads() starts numba's threading layer, whose OpenMP backend then sets the
+        # process's OpenMP thread count (a torch imported later would inherit it, OMP_NUM_THREADS or not).
+        # Ask it only if it runs already (a caller's numba.set_num_threads); else read NUMBA_NUM_THREADS.
+        from numba.np.ufunc import parallel
+
+        if getattr(parallel, "_is_initialized", False):
+            return numba.get_num_threads()
+        return numba.config.NUMBA_NUM_THREADS
     return integer(num_threads, "num_threads", low=1, high=numba.config.NUMBA_NUM_THREADS)
 
 

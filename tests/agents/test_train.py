@@ -136,6 +136,9 @@ def test_killed_run_resumes_from_its_checkpoint(tmp_path):
     curve = np.load(run_dir / "evaluations.npz")
     assert curve["timesteps"][-1] == model.num_timesteps and "mean_or" in curve.files
     assert (run_dir / "config.yml").exists() and (run_dir / "args.yml").exists() and (run_dir / "tb").is_dir()
+    # The run says how it used the cores: one torch thread, the env stepped on the calling thread.
+    threads = yaml.safe_load((run_dir / "config.yml").read_text())["threads"]
+    assert threads["torch"] == 1 and threads["env_step_threads"] == 1 and threads["cores_visible"] >= 1
 
 
 @pytest.mark.parametrize("argv, message", [

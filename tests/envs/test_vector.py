@@ -221,3 +221,26 @@ def test_num_threads_is_checked_and_changes_no_result():
     for bad in (0, numba.config.NUMBA_NUM_THREADS + 1, 1.5, "2"):
         with pytest.raises(ValueError, match="num_threads"):
             vector(VIEW, n=4, num_threads=bad)
+
+
+def test_stepping_a_batch_leaves_the_process_openmp_thread_count_alone():
+    """A threaded batch step must not start numba's OpenMP layer, which would set the process's OpenMP
+    thread count: a torch imported afterwards then ran 2 threads although OMP_NUM_THREADS=1."""
+    import os
+    import subprocess
+    import sys
+
+    probe = (
+        "import gymnasium as gym, numpy as np, continuum_gym\n"
+        "venv = gym.make_vec('ContinuumGym/ViewTracking-v0', num_envs=64, vectorization_mode='vector_entry_point')\n"
+        "venv.reset(seed=0)\n"
+        "for _ in range(3):\n"
+        "    venv.step(np.zeros(venv.action_space.shape, dtype=np.float32))\n"
+        "import torch\n"
+        "print(venv.unwrapped.core.num_threads, torch.get_num_threads())\n"
+    )
+    environ = dict(os.environ, OMP_NUM_THREADS="1", NUMBA_NUM_THREADS="2")
+    done = subprocess.run([sys.executable, "-c", probe], env=environ, capture_output=True, text=True, check=True)
+    batch_threads, torch_threads = map(int, done.stdout.split())
+    assert batch_threads == 2  # the batch itself was stepped on two threads
+    assert torch_threads == 1
