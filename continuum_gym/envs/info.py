@@ -42,6 +42,10 @@ class Column:
         """Python expression of this field's value, given the name of one row of the source array."""
         return f"({row}[{self.index}] != 0)" if self.kind is bool else f"{row}[{self.index}]"
 
+    def batch_expression(self, source: str) -> str:
+        """Python expression of the (N, ...) values as a fresh array, given the name of the source array."""
+        return f"({source}[:, {self.index}] != 0)" if self.kind is bool else f"{source}[:, {self.index}].copy()"
+
 
 class Bits:
     """Reader of a per-joint bit mask stored in column ``index`` of ``attribute``: (N, dof) bools."""
@@ -57,6 +61,9 @@ class Bits:
 
     def expression(self, row: str) -> str:
         return f"_bits({row}[{self.index}], core.dof)"
+
+    def batch_expression(self, source: str) -> str:
+        return f"_bits({source}[:, {self.index}], core.dof)"
 
 
 _BIT_TABLES: dict[int, np.ndarray] = {}
@@ -81,6 +88,9 @@ class Attribute:
     def expression(self, row: str) -> str:
         return row
 
+    def batch_expression(self, source: str) -> str:
+        return f"{source}.copy()"
+
 
 class AtMost:
     """Reader of ``attribute[:, index] <= bound`` (bools)."""
@@ -93,6 +103,9 @@ class AtMost:
 
     def expression(self, row: str) -> str:
         return f"({row}[{self.index}] <= {float(self.bound)!r})"
+
+    def batch_expression(self, source: str) -> str:
+        return f"({source}[:, {self.index}] <= {float(self.bound)!r})"
 
 
 def column(attribute: str, index: int, kind: type = float) -> Column:
@@ -112,7 +125,37 @@ def attribute(name: str) -> Attribute:
 
 def info_batch(fields: Sequence[InfoField], core) -> dict:
     """{name: (N, ...) array} of every field (fresh arrays, never views of the core's state)."""
-    return {f.name: np.array(f.read(core)) for f in fields}
+    cached = _BATCH_READERS.get(id(fields))
+    if cached is None or cached[0] is not fields:
+        cached = _BATCH_READERS[id(fields)] = (fields, _write_batch_reader(fields))
+    return cached[1](core)
+
+
+_BATCH_READERS: dict[int, tuple] = {}
+
+
+def _write_batch_reader(fields: Sequence[InfoField]) -> Callable:
+    """``info_batch`` for ``fields`` written out (see ``_row_reader``): the vector env builds it every step,
+    and for small batches the loop over readers with a copy of each result cost more than the kernel."""
+    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of}
+    sources: dict[str, str] = {}
+    lines = []
+    entries = []
+    for k, f in enumerate(fields):
+        read = f.read
+        if hasattr(read, "batch_expression"):
+            source = sources.get(read.attribute)
+            if source is None:
+                source = sources[read.attribute] = f"b{len(sources)}"
+                lines.append(f"    {source} = core.{read.attribute}")
+            expression = read.batch_expression(source)
+        else:
+            namespace[f"_read{k}"] = read
+            expression = f"_array(_read{k}(core))"
+        entries.append(f"        {f.name!r}: {expression},")
+    source = "\n".join(["def info_batch(core):", *lines, "    return {", *entries, "    }"])
+    exec(compile(source, "<continuum_gym info_batch>", "exec"), namespace)  # noqa: S102 - our own field list
+    return namespace["info_batch"]
 
 
 #: A single row's value of each scalar kind: numpy scalars (with a dtype, like the vector env's arrays),
@@ -150,7 +193,7 @@ def _row_reader(fields: Sequence[InfoField], core) -> Callable:
 
 
 def _write_row_reader(fields: Sequence[InfoField], convert: set) -> Callable:
-    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bit_row}
+    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of}
     sources: dict[str, str] = {}
     lines = []
     entries = []
@@ -176,12 +219,12 @@ def _write_row_reader(fields: Sequence[InfoField], convert: set) -> Callable:
     return namespace["info_row"]
 
 
-def _bit_row(mask, dof: int) -> np.ndarray:
-    """The (dof,) bools of a joint bit mask (a fresh array)."""
+def _bits_of(masks, dof: int) -> np.ndarray:
+    """The (..., dof) bools of joint bit masks (a fresh array; bits above the dof-th are ignored)."""
     table = _BIT_TABLES.get(dof)
-    if table is None:  # every mask of dof bits, unpacked once: a row's read is then one copy
+    if table is None:  # every mask of dof bits, unpacked once: a read is then one lookup
         table = _BIT_TABLES[dof] = ((np.arange(1 << dof)[:, None] >> np.arange(dof)) & 1).astype(bool)
-    return table[int(mask)].copy()
+    return np.take(table, np.bitwise_and(masks, (1 << dof) - 1), axis=0)  # take: a copy, also for one mask
 
 
 def fields_table(fields: Sequence[InfoField]) -> str:
