@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import resource
+import subprocess
 import sys
 import time
 
@@ -21,6 +23,19 @@ def best_seconds(fn, number: int, repeat: int = 5) -> float:
             fn()
         best = min(best, (time.perf_counter() - start) / number)
     return best
+
+
+def run_children_at_once(args: list[str], count: int, env: dict | None = None, what: str = "child") -> list[dict]:
+    """Start ``count`` copies of the command ``args`` at once; the JSON each prints on its last line."""
+    procs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+             for _ in range(count)]
+    results = []
+    for proc in procs:
+        out, err = proc.communicate()
+        if proc.returncode != 0:
+            raise RuntimeError(f"{what} failed:\n{err[-2000:]}")
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    return results
 
 
 def peak_rss_mib() -> float:

@@ -52,7 +52,7 @@ def start(python: str, tree: Tree, script: str, core: int, quick: bool, workdir:
 
 
 def finish(proc, out: Path, script: str, tree: Tree, began: float) -> Run:
-    stdout, stderr = proc.communicate()
+    _, stderr = proc.communicate()
     if proc.returncode != 0 or not out.is_file():
         raise RuntimeError(f"{script} in the {tree.label} tree exited with {proc.returncode}:\n{stderr[-3000:]}")
     return Run(script, tree.label, time.perf_counter() - began, 0.0, 0.0, 0.0, json.loads(out.read_text()))

@@ -20,15 +20,13 @@ with ``OMP_NUM_THREADS=1`` set by the caller, to show that it is left as the cal
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import finish, machine, print_table  # noqa: E402
+from common import finish, machine, print_table, run_children_at_once  # noqa: E402
 
 ENV_IDS = ("ContinuumGym/OcclusionAvoidance-v0", "ContinuumGym/ViewTracking-v0")
 UNITS = {"*.alone": "steps/s", "*.two_each": "steps/s", "*.ratio": "(derived)"}
@@ -69,15 +67,7 @@ print(json.dumps({"rate": rate, "threads_before": before, "threads_after": after
 def run_at_once(env_id: str, count: int, seconds: float, with_torch: bool) -> list[dict]:
     environ = dict(os.environ, OMP_NUM_THREADS="1")
     args = [sys.executable, "-c", _CHILD, env_id, str(seconds), "1" if with_torch else "0"]
-    procs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environ)
-             for _ in range(count)]
-    out = []
-    for proc in procs:
-        stdout, stderr = proc.communicate()
-        if proc.returncode != 0:
-            raise RuntimeError(f"{env_id}: child failed:\n{stderr[-2000:]}")
-        out.append(json.loads(stdout.strip().splitlines()[-1]))
-    return out
+    return run_children_at_once(args, count, environ, f"{env_id} child")
 
 
 def main(argv=None) -> int:

@@ -16,15 +16,13 @@ part) and the environment steps per second of the same stretch.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import finish, machine, print_table  # noqa: E402
+from common import finish, machine, print_table, run_children_at_once  # noqa: E402
 
 UNITS = {"*.env_steps_per_second": "steps/s", "*.gradient_steps_per_second": "gradient steps/s"}
 
@@ -97,16 +95,7 @@ def run_case(algo: str, env_id: str, torch_threads: int, runs: int, quick: bool)
         learning_starts = 1000
         steps = learning_starts + (1000 if quick else 4000)
     args = [sys.executable, "-c", _CHILD, algo, env_id, str(torch_threads), str(steps), str(learning_starts)]
-    env = dict(os.environ)
-    procs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-             for _ in range(runs)]
-    results = []
-    for proc in procs:
-        out, err = proc.communicate()
-        if proc.returncode != 0:
-            raise RuntimeError(f"{algo} on {env_id} failed:\n{err[-2000:]}")
-        results.append(json.loads(out.strip().splitlines()[-1]))
-    return results
+    return run_children_at_once(args, runs, dict(os.environ), f"{algo} on {env_id}")
 
 
 def main(argv=None) -> int:

@@ -21,8 +21,9 @@ class InfoField:
     """An ``info`` entry: ``read(core)`` returns its (N, ...) values; ``scalar`` converts one row's value."""
 
     name: str
-    #: (N, ...) values; a reader with ``attribute`` and ``expression(row_name)`` also reads one row
-    #: from the row of its source array (shared with the other fields of that array)
+    #: (N, ...) values; a reader with ``attribute``, ``expression(row_name)`` and ``batch_expression(name)``
+    #: also reads one row (or the batch) through generated code, from its source array read once for
+    #: all the fields of that array
     read: Callable[[Any], np.ndarray]
     scalar: type | None = float
     doc: str = ""
@@ -125,37 +126,11 @@ def attribute(name: str) -> Attribute:
 
 def info_batch(fields: Sequence[InfoField], core) -> dict:
     """{name: (N, ...) array} of every field (fresh arrays, never views of the core's state)."""
-    cached = _BATCH_READERS.get(id(fields))
+    key = (id(fields), "batch")
+    cached = _READERS.get(key)
     if cached is None or cached[0] is not fields:
-        cached = _BATCH_READERS[id(fields)] = (fields, _write_batch_reader(fields))
+        cached = _READERS[key] = (fields, _write_reader(fields, batch=True))
     return cached[1](core)
-
-
-_BATCH_READERS: dict[int, tuple] = {}
-
-
-def _write_batch_reader(fields: Sequence[InfoField]) -> Callable:
-    """``info_batch`` for ``fields`` written out (see ``_row_reader``): the vector env builds it every step,
-    and for small batches the loop over readers with a copy of each result cost more than the kernel."""
-    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of}
-    sources: dict[str, str] = {}
-    lines = []
-    entries = []
-    for k, f in enumerate(fields):
-        read = f.read
-        if hasattr(read, "batch_expression"):
-            source = sources.get(read.attribute)
-            if source is None:
-                source = sources[read.attribute] = f"b{len(sources)}"
-                lines.append(f"    {source} = core.{read.attribute}")
-            expression = read.batch_expression(source)
-        else:
-            namespace[f"_read{k}"] = read
-            expression = f"_array(_read{k}(core))"
-        entries.append(f"        {f.name!r}: {expression},")
-    source = "\n".join(["def info_batch(core):", *lines, "    return {", *entries, "    }"])
-    exec(compile(source, "<continuum_gym info_batch>", "exec"), namespace)  # noqa: S102 - our own field list
-    return namespace["info_batch"]
 
 
 #: A single row's value of each scalar kind: numpy scalars (with a dtype, like the vector env's arrays),
@@ -168,55 +143,65 @@ def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
     return _row_reader(fields, core)(core, row)
 
 
-_ROW_READERS: dict[int, tuple] = {}
+#: (id of a field list, "row" / "batch") -> (the field list, its written-out reader)
+_READERS: dict[tuple[int, str], tuple] = {}
 
 
 def _row_reader(fields: Sequence[InfoField], core) -> Callable:
     """A function ``(core, row) -> info dict`` written out for ``fields``, made once per field list.
 
-    The single env builds ``info`` every step; a loop over the fields that resolves each reader cost
-    more than the values themselves (15 fields: ~8 us against ~2 us for the dict written out, the way
-    ``dataclasses`` writes ``__init__``). Each source array's row is read once. Readers with
-    ``expression`` say how their value is read from that row; others are called on the whole batch.
-    A value whose type is not the field's numpy scalar type on the first call gets a conversion.
+    The single env builds ``info`` every step (and the vector env its batch version, ``info_batch``);
+    a loop over the fields that resolves each reader cost more than the values themselves (15 fields:
+    ~8 us against ~2 us for the dict written out, the way ``dataclasses`` writes ``__init__``), and for
+    small batches more than the kernel. Each source array (or its row) is read once. Readers with
+    ``expression`` / ``batch_expression`` say how their value is read from it; others are called on the
+    whole batch. A row value whose type is not the field's numpy scalar type on the first call gets a
+    conversion.
     """
-    cached = _ROW_READERS.get(id(fields))
+    key = (id(fields), "row")
+    cached = _READERS.get(key)
     if cached is not None and cached[0] is fields:
         return cached[1]
-    reader = _write_row_reader(fields, convert=set())
+    reader = _write_reader(fields, batch=False)
     sample = reader(core, 0)
     convert = {f.name for f in fields if f.scalar is not None and type(sample[f.name]) is not NUMPY_SCALARS[f.scalar]}
     if convert:
-        reader = _write_row_reader(fields, convert)
-    _ROW_READERS[id(fields)] = (fields, reader)
+        reader = _write_reader(fields, batch=False, convert=convert)
+    _READERS[key] = (fields, reader)
     return reader
 
 
-def _write_row_reader(fields: Sequence[InfoField], convert: set) -> Callable:
+def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = frozenset()) -> Callable:
+    """``info_batch(core)`` (``batch``) or ``info_row(core, row)`` for ``fields``, as compiled Python."""
     namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of}
+    index = "" if batch else "[row]"
     sources: dict[str, str] = {}
     lines = []
     entries = []
     for k, f in enumerate(fields):
         read = f.read
-        if hasattr(read, "expression"):
+        written = hasattr(read, "expression")
+        if written:
             source = sources.get(read.attribute)
             if source is None:
                 source = sources[read.attribute] = f"s{len(sources)}"
-                lines.append(f"    {source} = core.{read.attribute}[row]")
-            expression = read.expression(source)
+                lines.append(f"    {source} = core.{read.attribute}{index}")
+            expression = read.batch_expression(source) if batch else read.expression(source)
         else:
             namespace[f"_read{k}"] = read
-            expression = f"_read{k}(core)[row]"
-        if f.scalar is None and not getattr(read, "fresh", False):
+            expression = f"_read{k}(core){index}"
+        if batch:  # batch expressions give fresh arrays; a plain reader's result is copied
+            expression = expression if written else f"_array({expression})"
+        elif f.scalar is None and not getattr(read, "fresh", False):
             expression = f"_array({expression})"
         elif f.name in convert:
             namespace[f"_kind{k}"] = NUMPY_SCALARS[f.scalar]
             expression = f"_kind{k}({expression})"
         entries.append(f"        {f.name!r}: {expression},")
-    source = "\n".join(["def info_row(core, row):", *lines, "    return {", *entries, "    }"])
-    exec(compile(source, "<continuum_gym info_row>", "exec"), namespace)  # noqa: S102 - our own field list
-    return namespace["info_row"]
+    name = "info_batch" if batch else "info_row"
+    source = "\n".join([f"def {name}(core{'' if batch else ', row'}):", *lines, "    return {", *entries, "    }"])
+    exec(compile(source, f"<continuum_gym {name}>", "exec"), namespace)  # noqa: S102 - our own field list
+    return namespace[name]
 
 
 def _bits_of(masks, dof: int) -> np.ndarray:
