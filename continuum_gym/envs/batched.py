@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, info_row
+from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
 from continuum_gym.validation import integer
 
 
@@ -115,9 +115,14 @@ def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int, threads: in
         future.result()
 
 
-def _is_kernel_array(array, dtype, ndim: int) -> bool:
-    return (type(array) is np.ndarray and array.dtype == dtype and array.ndim == ndim and array.flags.c_contiguous
-            and array.flags.writeable and array.flags.aligned)
+_FLOAT64 = np.dtype(np.float64)
+_UINT8 = np.dtype(np.uint8)
+
+
+def _is_kernel_array(array, dtype: np.dtype, ndim: int) -> bool:
+    # ``is``: numpy's native dtypes are singletons (any other dtype object takes the dispatcher's path);
+    # flags.carray: C-contiguous, aligned and writeable, one flags object instead of three
+    return type(array) is np.ndarray and array.dtype is dtype and array.ndim == ndim and array.flags.carray
 
 
 class KernelCall:
@@ -135,14 +140,17 @@ class KernelCall:
 
     def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, n_chunks: int,
                  threads: int = 1) -> None:
-        if not (_is_kernel_array(actions, np.float64, 2) and _is_kernel_array(active, np.uint8, 1)):
+        if not (_is_kernel_array(actions, _FLOAT64, 2) and _is_kernel_array(active, _UINT8, 1)):
             run_in_chunks(self.kernel, args, num_rows, n_chunks, threads)
             return
         if self.entry is None:
             signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, 0, 0))
             self.kernel.compile(signature)
             self.entry = self.kernel.overloads[signature].entry_point
-        run_in_chunks(self.entry, args, num_rows, n_chunks, threads)
+        if n_chunks <= 1:  # the single env's and small batches' path: no further Python call
+            self.entry(*args, 0, num_rows)
+        else:
+            run_in_chunks(self.entry, args, num_rows, n_chunks, threads)
 
 
 class BatchedCore:
@@ -182,9 +190,14 @@ class BatchedCore:
         """Every ``info`` entry for the whole batch: {name: (N, ...) array}."""
         return info_batch(self.info_fields, self)
 
+    _info_row_reader = None  # the written-out reader of info_fields, found on the first info_row
+
     def info_row(self, row: int) -> dict:
         """Every ``info`` entry of one row: numpy scalars and fresh arrays."""
-        return info_row(self.info_fields, self, row)
+        reader = self._info_row_reader
+        if reader is None:
+            reader = self._info_row_reader = row_reader(self.info_fields, self)
+        return reader(self, row)
 
     def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray):  # pragma: no cover - interface
         raise NotImplementedError
@@ -224,6 +237,7 @@ class BatchedCore:
         state.pop("_custom", None)
         state.pop("_reward_slot", None)
         state.pop("_step_call", None)  # a compiled entry point: looked up again after unpickling
+        state.pop("_info_row_reader", None)  # generated code: found again on first use
         return state
 
     def __setstate__(self, state: dict) -> None:

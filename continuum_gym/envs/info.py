@@ -61,7 +61,7 @@ class Bits:
     fresh = True  # its row value is a new array already
 
     def expression(self, row: str) -> str:
-        return f"_bits({row}[{self.index}], core.dof)"
+        return f"bit_rows[{row}[{self.index}] & bit_mask].copy()"
 
     def batch_expression(self, source: str) -> str:
         return f"_bits({source}[:, {self.index}], core.dof)"
@@ -140,14 +140,14 @@ NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
 
 def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
     """{name: value} of one row: numpy scalars for scalar fields, fresh arrays for the others."""
-    return _row_reader(fields, core)(core, row)
+    return row_reader(fields, core)(core, row)
 
 
 #: (id of a field list, "row" / "batch") -> (the field list, its written-out reader)
 _READERS: dict[tuple[int, str], tuple] = {}
 
 
-def _row_reader(fields: Sequence[InfoField], core) -> Callable:
+def row_reader(fields: Sequence[InfoField], core) -> Callable:
     """A function ``(core, row) -> info dict`` written out for ``fields``, made once per field list.
 
     The single env builds ``info`` every step (and the vector env its batch version, ``info_batch``);
@@ -173,10 +173,13 @@ def _row_reader(fields: Sequence[InfoField], core) -> Callable:
 
 def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = frozenset()) -> Callable:
     """``info_batch(core)`` (``batch``) or ``info_row(core, row)`` for ``fields``, as compiled Python."""
-    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of}
+    namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of, "_bit_table": _bit_table}
     index = "" if batch else "[row]"
     sources: dict[str, str] = {}
     lines = []
+    if not batch and any(isinstance(f.read, Bits) for f in fields):  # one row of the table per bit field
+        lines.append("    bit_rows = _bit_table(core.dof)")
+        lines.append("    bit_mask = (1 << core.dof) - 1")
     entries = []
     for k, f in enumerate(fields):
         read = f.read
@@ -204,12 +207,17 @@ def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = froze
     return namespace[name]
 
 
-def _bits_of(masks, dof: int) -> np.ndarray:
-    """The (..., dof) bools of joint bit masks (a fresh array; bits above the dof-th are ignored)."""
+def _bit_table(dof: int) -> np.ndarray:
+    """Every mask of ``dof`` bits, unpacked once ((2^dof, dof) bools): a read is then one lookup."""
     table = _BIT_TABLES.get(dof)
-    if table is None:  # every mask of dof bits, unpacked once: a read is then one lookup
+    if table is None:
         table = _BIT_TABLES[dof] = ((np.arange(1 << dof)[:, None] >> np.arange(dof)) & 1).astype(bool)
-    return np.take(table, np.bitwise_and(masks, (1 << dof) - 1), axis=0)  # take: a copy, also for one mask
+    return table
+
+
+def _bits_of(masks, dof: int) -> np.ndarray:
+    """The (N, dof) bools of an (N,) array of joint bit masks (fresh; bits above the dof-th are ignored)."""
+    return _bit_table(dof)[np.bitwise_and(masks, (1 << dof) - 1)]  # fancy indexing copies
 
 
 def fields_table(fields: Sequence[InfoField]) -> str:
@@ -227,6 +235,7 @@ class RewardTerms(np.ndarray):
     into a tensor (torchrl's info readers) take it as it is; a nested dict would break them.
     """
 
+    __slots__ = ("names",)  # no instance __dict__: made every step of a single env
     names: tuple[str, ...]
 
     def __new__(cls, values: np.ndarray, names: Sequence[str]) -> RewardTerms:
