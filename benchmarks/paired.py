@@ -10,7 +10,8 @@ to core 1 (``taskset``), and the next round swaps the cores; both see the same d
 neighbours. Every run has ``NUMBA_NUM_THREADS=1``, so this measures one thread per tree: the threaded
 batch rows of ``envs.py`` are then single-threaded too, and thread scaling is not what is compared.
 
-Worktrees, the per-key best-of and the table are ``compare.py``'s (same keys, units and flags).
+Worktrees (``revisions.py``), the per-key best-of and the table (``ratios.py``) are those of ``compare.py``
+(same keys, units and flags).
 """
 
 from __future__ import annotations
@@ -26,18 +27,15 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from compare import (  # noqa: E402
+from ratios import Run, compare_runs, print_rows, write_json_atomic  # noqa: E402
+from revisions import (  # noqa: E402
     DEFAULT_REV,
-    Run,
     Tree,
     add_worktree,
     check_import,
-    compare_runs,
     git,
-    print_rows,
     remove_worktree,
     tree_env,
-    write_json_atomic,
 )
 
 
