@@ -374,16 +374,15 @@ def main(argv=None) -> int:
     parser.add_argument("--platform", action="store_true",
                         help="write this numerics platform's own set (platforms/<key>/) instead of the reference "
                              "set; run it from the revision that wrote the reference set")
-    parser.add_argument("--out", type=Path, help="write the set into this directory instead")
     args = parser.parse_args(argv)
     platform = numerics_platform()
     if args.check:
         directory, own = golden_set()
         print(f"platform {platform_key(platform)}: comparing with {directory}")
     else:
-        directory = args.out or (PLATFORMS_DIR / platform_key(platform) if args.platform else GOLDEN_DIR)
+        directory = PLATFORMS_DIR / platform_key(platform) if args.platform else GOLDEN_DIR
         directory.mkdir(parents=True, exist_ok=True)
-        if directory != GOLDEN_DIR:
+        if args.platform:
             write_platform(directory, platform)
     failed = False
     for part in args.only:

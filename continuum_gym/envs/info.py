@@ -2,9 +2,10 @@
 
 A core lists its entries as ``InfoField``s: a name, how to read the (N, ...) batch values from the
 core's arrays, and the Python type of a single row's value (``None``: an array). ``info_batch`` and
-``info_row`` both come from that one list, so the single env, the vector env and the SB3 adapter
-report the same entries with the same values: numpy arrays (batch) and numpy scalars (one row), and
-the weighted reward terms as one named array ``reward_terms`` (``RewardTerms``).
+``row_reader`` (behind a core's ``info`` / ``info_row``) both come from that one list, so the single
+env, the vector env and the SB3 adapter report the same entries with the same values: numpy arrays
+(batch) and numpy scalars (one row), and the weighted reward terms as one named array
+``reward_terms`` (``RewardTerms``).
 """
 
 from __future__ import annotations
@@ -55,8 +56,7 @@ class Bits:
         self.attribute, self.index = attribute, index
 
     def __call__(self, core) -> np.ndarray:
-        values = getattr(core, self.attribute)[:, self.index]
-        return ((values[:, None] >> np.arange(core.dof)) & 1).astype(bool)
+        return _bits_of(getattr(core, self.attribute)[:, self.index], core.dof)
 
     fresh = True  # its row value is a new array already
 
@@ -136,11 +136,6 @@ def info_batch(fields: Sequence[InfoField], core) -> dict:
 #: A single row's value of each scalar kind: numpy scalars (with a dtype, like the vector env's arrays),
 #: so that clients that read infos as arrays (torchrl, Gymnasium's vector wrappers) take them as they are.
 NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
-
-
-def info_row(fields: Sequence[InfoField], core, row: int) -> dict:
-    """{name: value} of one row: numpy scalars for scalar fields, fresh arrays for the others."""
-    return row_reader(fields, core)(core, row)
 
 
 #: (id of a field list, "row" / "batch") -> (the field list, its written-out reader)
