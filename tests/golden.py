@@ -19,6 +19,7 @@ The same code on an AVX2-only AMD EPYC differs from the reference set by up to 2
 and, through the closed loops of the policies, in the evaluation's last printed digit. So a platform
 can have its own set, ``platforms/<key>/`` (``python tests/golden.py --platform``, recorded from the
 revision that last wrote the reference set, never from the code under test), compared bit for bit.
+A platform's set holds only the records that differ from the reference set; the others are read from it.
 On a platform without its own set, the reference set is compared bit for bit first and, if any bit
 differs, within ``CROSS_PLATFORM_TOLERANCE``, with every integer and boolean still exactly equal.
 """
@@ -36,6 +37,7 @@ import numpy as np
 GOLDEN_DIR = Path(__file__).resolve().parent / "data" / "golden"
 PLATFORMS_DIR = GOLDEN_DIR / "platforms"
 RECORDS = ("env_steps", "reproduce", "evaluate")
+RECORD_FILES = {"env_steps": "env_steps.npz", "reproduce": "reproduce.json", "evaluate": "evaluate.json"}
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
 VIEW = "ContinuumGym/ViewTracking-v0"
 #: For a platform without its own set: (path fragment, kind, (rtol, atol) or None = not compared), first
@@ -237,7 +239,14 @@ def golden_set() -> tuple[Path, bool]:
     return (own, True) if (own / "platform.json").is_file() else (GOLDEN_DIR, False)
 
 
+def record_path(directory: Path, part: str) -> Path:
+    """Where ``part`` is stored: a platform's set omits the records equal to the reference set's."""
+    path = directory / RECORD_FILES[part]
+    return path if path.is_file() or directory == GOLDEN_DIR else GOLDEN_DIR / RECORD_FILES[part]
+
+
 def load_record(directory: Path, part: str):
+    directory = record_path(directory, part).parent
     if part == "env_steps":
         with np.load(directory / "env_steps.npz") as stored:
             return dict(stored)
@@ -396,11 +405,14 @@ def main(argv=None) -> int:
                   f"difference {worst_abs:.3g} absolute, {worst_rel:.3g} relative")
             for line in problems[:20]:
                 print("   ", line)
+        elif args.platform and not record_problems(part, load_record(GOLDEN_DIR, part), result, True)[0]:
+            (directory / RECORD_FILES[part]).unlink(missing_ok=True)
+            print(f"{part}: equal to the reference set bit for bit, not stored in {directory}")
         elif part == "env_steps":
             np.savez_compressed(directory / "env_steps.npz", **result)
         else:
             (directory / f"{part}.json").write_text(json.dumps(result, indent=1) + "\n")
-        if not args.check:
+        if not args.check and (directory / RECORD_FILES[part]).is_file():
             print(f"wrote {part} into {directory}")
     return 1 if failed else 0
 
