@@ -13,7 +13,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from continuum_gym.geometry.force_field import potential_gradient_kernel
+from continuum_gym.geometry.force_field import potential_gradient_framed
 from continuum_gym.geometry.lens_cone import centre_distance_kernel
 from continuum_gym.robots.linalg import twist_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
@@ -104,14 +104,15 @@ def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scr
 
 @njit(cache=True)
 def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
-    """Eqs (22)-(24) for a desired twist ``xi`` (6,), with J and the tip in ``scratch`` already.
+    """Eqs (22)-(24) for a desired twist ``xi`` (6,), with J and the tip in ``scratch`` and the frames in
+    ``ws`` already (``tip_kernel`` at q leaves both).
 
     Returns (gamma_dot, frozen_mask_bits, rate_scale); limit handling as ``baselines.occlusion`` says.
     """
     p, J, grad, A, B, mask = scratch.p, scratch.J, scratch.grad, scratch.A, scratch.B, scratch.mask
     dof = q.shape[0]
     if prm.use_gradient:
-        potential_gradient_kernel(q, robot, ws, prm.segments, prm.fractions, scratch.P, scratch.JV, gamma,
+        potential_gradient_framed(q, robot, ws, prm.segments, prm.fractions, scratch.P, scratch.JV, gamma,
                                   prm.cone, prm.field, grad)
         add_limit_barrier(q, prm.lower, prm.upper, prm.barrier_gain, prm.barrier_margin, grad)
     else:

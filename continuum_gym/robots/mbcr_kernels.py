@@ -17,8 +17,7 @@ from numba import njit
 from continuum_gym.robots.segment import (
     bend_rotation,
     bend_terms,
-    segment_jacobian,
-    segment_position_cs,
+    segment_jacobian_terms,
 )
 
 HALF_PI = 0.5 * math.pi
@@ -27,8 +26,12 @@ HALF_PI = 0.5 * math.pi
 #: N·m/rad², and the number of samples of the straight inserted part used for VOI.
 MBCRKernelArgs = namedtuple("MBCRKernelArgs", ["lengths", "stiffness", "n_insert"])
 #: Scratch arrays of one robot: base frames R (n+1, 3, 3) and g (n+1, 3) of every segment, a local
-#: position and rotation, one segment's (3, 2) twist columns, and (3, dof) point Jacobians.
-MBCRWorkspace = namedtuple("MBCRWorkspace", ["R_base", "g_base", "p_local", "Q", "jv", "jw", "Jv", "Jw"])
+#: position and rotation, one segment's (3, 2) twist columns, (3, dof) point Jacobians, and what
+#: ``frames_and_columns`` keeps of each segment: cos / sin of delta (n, 2) and the world-frame twist
+#: columns of the whole segment, linear V (n + 1, 3, 2) and angular W (n + 1, 3, 2), theta column first
+#: (the last row holds one body point's own, partial segment).
+MBCRWorkspace = namedtuple("MBCRWorkspace", ["R_base", "g_base", "p_local", "Q", "jv", "jw", "Jv", "Jw",
+                                             "cs", "V", "W"])
 
 
 @njit(cache=True)
@@ -37,7 +40,8 @@ def make_workspace(n_segments):
     dof = 2 * n_segments + 1
     return MBCRWorkspace(np.empty((n_segments + 1, 3, 3)), np.empty((n_segments + 1, 3)), np.empty(3),
                          np.empty((3, 3)), np.empty((3, 2)), np.empty((3, 2)), np.empty((3, dof)),
-                         np.empty((3, dof)))
+                         np.empty((3, dof)), np.empty((n_segments, 2)), np.empty((n_segments + 1, 3, 2)),
+                         np.empty((n_segments + 1, 3, 2)))
 
 
 @njit(cache=True)
@@ -50,9 +54,29 @@ def all_finite(x):
 
 @njit(cache=True)
 def frames(q, robot, ws):
-    """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected)."""
-    n = robot.lengths.shape[0]
-    R_base, g_base, p_local, Q = ws.R_base, ws.g_base, ws.p_local, ws.Q
+    """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected), and ws.cs."""
+    fill_frames(q, robot, ws, False)
+
+
+@njit(cache=True)
+def frames_and_columns(q, robot, ws):
+    """``frames`` plus every whole segment's world twist columns in ws.V, ws.W (what all point Jacobians share).
+
+    A point's Jacobian then needs only its own segment's terms (``point_columns_framed``): the proximal
+    segments' columns are the same for every point, up to the lever arm.
+    """
+    fill_frames(q, robot, ws, True)
+
+
+# The kernels below take the workspace's arrays and row indices rather than the bundle or row views:
+# every array taken out of a tuple or sliced into a view is a reference count the compiler cannot
+# always prune, and those atomic updates were a quarter of an occlusion step.
+@njit(cache=True, inline="always")
+def fill_frames(q, robot, ws, with_columns):
+    lengths = robot.lengths
+    n = lengths.shape[0]
+    R_base, g_base, p_local, Q, jv, jw, cs, V, W = ws.R_base, ws.g_base, ws.p_local, ws.Q, ws.jv, ws.jw, ws.cs, \
+        ws.V, ws.W
     for a in range(3):
         for b in range(3):
             R_base[0, a, b] = 1.0 if a == b else 0.0
@@ -62,10 +86,15 @@ def frames(q, robot, ws):
     for j in range(n):
         bend = HALF_PI - q[2 * j]
         delta = q[2 * j + 1]
-        s, omc, a, b, _, _ = bend_terms(bend)  # once for the position and the rotation
+        s, omc, a, b, da, db = bend_terms(bend)  # once for the position, the rotation and the columns
         cd = math.cos(delta)
         sd = math.sin(delta)
-        length = robot.lengths[j]
+        cs[j, 0] = cd
+        cs[j, 1] = sd
+        length = lengths[j]
+        if with_columns:
+            segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, 1.0, jv, jw)
+            rotate_columns(R_base, j, jv, jw, V, W, j)
         p_local[0] = length * cd * a
         p_local[1] = -length * sd * a
         p_local[2] = length * b
@@ -82,62 +111,86 @@ def frames(q, robot, ws):
                 R_base[j + 1, a, b] = acc2
 
 
+@njit(cache=True, inline="always")
+def rotate_columns(R_base, j, jv, jw, V, W, row):
+    """V[row] = R_j jv, W[row] = R_j jw for one segment's (3, 2) twist columns, the theta column negated
+    first (q holds theta = pi/2 - bend: its column is minus the bend column)."""
+    for a in range(3):
+        jv[a, 0] = -jv[a, 0]
+        jw[a, 0] = -jw[a, 0]
+    for c in range(2):
+        v0 = 0.0
+        v1 = 0.0
+        v2 = 0.0
+        w0 = 0.0
+        w1 = 0.0
+        w2 = 0.0
+        for b in range(3):
+            v0 += R_base[j, 0, b] * jv[b, c]
+            v1 += R_base[j, 1, b] * jv[b, c]
+            v2 += R_base[j, 2, b] * jv[b, c]
+            w0 += R_base[j, 0, b] * jw[b, c]
+            w1 += R_base[j, 1, b] * jw[b, c]
+            w2 += R_base[j, 2, b] * jw[b, c]
+        V[row, 0, c] = v0
+        V[row, 1, c] = v1
+        V[row, 2, c] = v2
+        W[row, 0, c] = w0
+        W[row, 1, c] = w1
+        W[row, 2, c] = w2
+
+
 @njit(cache=True)
 def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
     """Columns of the twist of a body point (segment, sigma) at world position ``point``.
 
-    Needs ``frames`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
+    Needs ``frames_and_columns`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
     (g_k - point)^ R_{k-1} J_{k,w} (eq 4 corrected, paper-notes §1.2); own segment evaluated at sigma;
     distal columns 0; insertion column e3. ``Jw`` is filled only when ``with_angular``.
     """
-    R_base, g_base, jv, jw = ws.R_base, ws.g_base, ws.jv, ws.jw
-    dof = q.shape[0]
+    s, omc, a, _, da, db = bend_terms(sigma * (HALF_PI - q[2 * segment]))
+    point_columns_framed(robot.lengths, ws.R_base, ws.g_base, ws.cs, ws.jv, ws.jw, ws.V, ws.W, q.shape[0], segment,
+                         sigma, point[0], point[1], point[2], s, omc, a, da, db, Jv, Jw, with_angular)
+
+
+@njit(cache=True, inline="always")
+def point_columns_framed(lengths, R_base, g_base, cs, jv, jw, V, W, dof, segment, sigma, px, py, pz, s, omc, a, da,
+                         db, Jv, Jw, with_angular):
+    """``point_columns`` on the workspace's arrays, given the bend terms at sigma * bend of the point's own
+    segment (its position needs them too); the last row of V, W is the own segment's scratch."""
     for col in range(dof):
-        for a in range(3):
-            Jv[a, col] = 0.0
+        for r in range(3):
+            Jv[r, col] = 0.0
             if with_angular:
-                Jw[a, col] = 0.0
+                Jw[r, col] = 0.0
     Jv[2, dof - 1] = 1.0
-    for k in range(segment + 1):
-        bend = HALF_PI - q[2 * k]
-        delta = q[2 * k + 1]
-        s = sigma if k == segment else 1.0
-        segment_jacobian(bend, delta, robot.lengths[k], s, jv, jw)
-        # q holds theta = pi/2 - bend: its column is minus the bend column
-        for a in range(3):
-            jv[a, 0] = -jv[a, 0]
-            jw[a, 0] = -jw[a, 0]
+    for k in range(segment):
         # Lever arm from the point back to the end of this (whole) proximal segment.
-        if k == segment:
-            arm0 = 0.0
-            arm1 = 0.0
-            arm2 = 0.0
-        else:
-            arm0 = g_base[k + 1, 0] - point[0]
-            arm1 = g_base[k + 1, 1] - point[1]
-            arm2 = g_base[k + 1, 2] - point[2]
-        for c in range(2):
-            v0 = 0.0
-            v1 = 0.0
-            v2 = 0.0
-            w0 = 0.0
-            w1 = 0.0
-            w2 = 0.0
-            for b in range(3):
-                v0 += R_base[k, 0, b] * jv[b, c]
-                v1 += R_base[k, 1, b] * jv[b, c]
-                v2 += R_base[k, 2, b] * jv[b, c]
-                w0 += R_base[k, 0, b] * jw[b, c]
-                w1 += R_base[k, 1, b] * jw[b, c]
-                w2 += R_base[k, 2, b] * jw[b, c]
-            col = 2 * k + c
-            Jv[0, col] = v0 + arm1 * w2 - arm2 * w1
-            Jv[1, col] = v1 + arm2 * w0 - arm0 * w2
-            Jv[2, col] = v2 + arm0 * w1 - arm1 * w0
-            if with_angular:
-                Jw[0, col] = w0
-                Jw[1, col] = w1
-                Jw[2, col] = w2
+        add_columns(V, W, k, g_base[k + 1, 0] - px, g_base[k + 1, 1] - py, g_base[k + 1, 2] - pz, 2 * k, Jv, Jw,
+                    with_angular)
+    row = segment
+    if sigma != 1.0:
+        segment_jacobian_terms(s, omc, a, da, db, cs[segment, 0], cs[segment, 1], lengths[segment], sigma, jv, jw)
+        row = V.shape[0] - 1
+        rotate_columns(R_base, segment, jv, jw, V, W, row)
+    add_columns(V, W, row, 0.0, 0.0, 0.0, 2 * segment, Jv, Jw, with_angular)
+
+
+@njit(cache=True, inline="always")
+def add_columns(V, W, row, arm0, arm1, arm2, col0, Jv, Jw, with_angular):
+    """Columns col0, col0 + 1 of a point's twist from a segment's world columns and the lever arm (m)."""
+    for c in range(2):
+        w0 = W[row, 0, c]
+        w1 = W[row, 1, c]
+        w2 = W[row, 2, c]
+        col = col0 + c
+        Jv[0, col] = V[row, 0, c] + arm1 * w2 - arm2 * w1
+        Jv[1, col] = V[row, 1, c] + arm2 * w0 - arm0 * w2
+        Jv[2, col] = V[row, 2, c] + arm0 * w1 - arm1 * w0
+        if with_angular:
+            Jw[0, col] = w0
+            Jw[1, col] = w1
+            Jw[2, col] = w2
 
 
 @njit(cache=True)
@@ -150,28 +203,41 @@ def body_point(q, robot, ws, segment, sigma, out):
 @njit(cache=True)
 def body_point_cs(q, robot, ws, segment, sigma, cd, sd, out):
     """``body_point`` given cos and sin of the segment's delta (shared by all its samples)."""
-    R_base, g_base, p_local = ws.R_base, ws.g_base, ws.p_local
-    bend = HALF_PI - q[2 * segment]
-    segment_position_cs(sigma * bend, cd, sd, sigma * robot.lengths[segment], p_local)
-    for a in range(3):
-        acc = g_base[segment, a]
-        for b in range(3):
-            acc += R_base[segment, a, b] * p_local[b]
-        out[a] = acc
+    _, _, a, b, _, _ = bend_terms(sigma * (HALF_PI - q[2 * segment]))
+    out[0], out[1], out[2] = point_in_world(ws.R_base, ws.g_base, segment, sigma * robot.lengths[segment], cd, sd,
+                                            a, b)
+
+
+@njit(cache=True, inline="always")
+def point_in_world(R_base, g_base, segment, length, cd, sd, a, b):
+    """World position (m) of the point of ``segment`` at arc length ``length`` (m) from its base, given
+    cos / sin of delta and the shape factors a, b at its bend (eq 8 of paper 000, then the base frame)."""
+    p0 = length * cd * a
+    p1 = -length * sd * a
+    p2 = length * b
+    x = g_base[segment, 0] + R_base[segment, 0, 0] * p0 + R_base[segment, 0, 1] * p1 + R_base[segment, 0, 2] * p2
+    y = g_base[segment, 1] + R_base[segment, 1, 0] * p0 + R_base[segment, 1, 1] * p1 + R_base[segment, 1, 2] * p2
+    z = g_base[segment, 2] + R_base[segment, 2, 0] * p0 + R_base[segment, 2, 1] * p1 + R_base[segment, 2, 2] * p2
+    return x, y, z
 
 
 @njit(cache=True)
 def tip_kernel(q, robot, ws, p, R, J):
-    """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q."""
-    frames(q, robot, ws)
-    n = robot.lengths.shape[0]
+    """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q.
+
+    Leaves ``frames_and_columns`` of q in ws, which ``points_kernel_framed`` reuses."""
+    frames_and_columns(q, robot, ws)
+    lengths = robot.lengths
+    n = lengths.shape[0]
     dof = q.shape[0]
     R_base, g_base, Jv, Jw = ws.R_base, ws.g_base, ws.Jv, ws.Jw
     for a in range(3):
         p[a] = g_base[n, a]
         for b in range(3):
             R[a, b] = R_base[n, a, b]
-    point_columns(q, robot, ws, n - 1, 1.0, p, Jv, Jw, True)
+    # sigma = 1: the own segment's columns are the whole segment's, so its bend terms are not read.
+    point_columns_framed(lengths, R_base, g_base, ws.cs, ws.jv, ws.jw, ws.V, ws.W, dof, n - 1, 1.0, p[0], p[1], p[2],
+                         0.0, 0.0, 0.0, 0.0, 0.0, Jv, Jw, True)
     for a in range(3):
         for col in range(dof):
             J[a, col] = Jv[a, col]
@@ -200,11 +266,28 @@ def tip_single(q, lengths, stiffness, n_insert, p, R, J):
 @njit(cache=True)
 def points_kernel(q, robot, ws, segments, fractions, P, JV):
     """Positions (m, 3) and translational Jacobians (m, 3, dof) of body points, for one q."""
-    frames(q, robot, ws)
-    dummy = ws.Jw
+    frames_and_columns(q, robot, ws)
+    points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
+
+
+@njit(cache=True)
+def points_kernel_framed(q, robot, ws, segments, fractions, P, JV):
+    """``points_kernel`` with ``frames_and_columns`` of q already in ws (as ``tip_kernel`` leaves it)."""
+    lengths = robot.lengths
+    R_base, g_base, cs, jv, jw, V, W, dummy = ws.R_base, ws.g_base, ws.cs, ws.jv, ws.jw, ws.V, ws.W, ws.Jw
+    dof = q.shape[0]
     for i in range(segments.shape[0]):
-        body_point(q, robot, ws, segments[i], fractions[i], P[i])
-        point_columns(q, robot, ws, segments[i], fractions[i], P[i], JV[i], dummy, False)
+        segment = segments[i]
+        sigma = fractions[i]
+        # One set of bend terms at sigma * bend for the point's position and its own segment's columns.
+        s, omc, a, b, da, db = bend_terms(sigma * (HALF_PI - q[2 * segment]))
+        px, py, pz = point_in_world(R_base, g_base, segment, sigma * lengths[segment], cs[segment, 0],
+                                    cs[segment, 1], a, b)
+        P[i, 0] = px
+        P[i, 1] = py
+        P[i, 2] = pz
+        point_columns_framed(lengths, R_base, g_base, cs, jv, jw, V, W, dof, segment, sigma, px, py, pz, s, omc, a,
+                             da, db, JV[i], dummy, False)
 
 
 @njit(cache=True)
@@ -227,8 +310,10 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
     outside every cone, so the count stays fixed and batches keep one shape.
     """
     frames(q, robot, ws)
-    n = robot.lengths.shape[0]
+    lengths = robot.lengths
+    n = lengths.shape[0]
     n_insert = robot.n_insert
+    R_base, g_base, cs = ws.R_base, ws.g_base, ws.cs
     idx = 0
     for k in range(n_insert):
         out[idx, 0] = 0.0
@@ -237,10 +322,12 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
         idx += 1
     for j in range(n):
         start = 0 if j == 0 else 1
-        cd = math.cos(q[2 * j + 1])
-        sd = math.sin(q[2 * j + 1])
+        bend = HALF_PI - q[2 * j]
         for k in range(start, n_per_segment + 1):
-            body_point_cs(q, robot, ws, j, k / n_per_segment, cd, sd, out[idx])
+            sigma = k / n_per_segment
+            _, _, a, b, _, _ = bend_terms(sigma * bend)
+            out[idx, 0], out[idx, 1], out[idx, 2] = point_in_world(R_base, g_base, j, sigma * lengths[j], cs[j, 0],
+                                                                   cs[j, 1], a, b)
             idx += 1
 
 
