@@ -101,7 +101,7 @@ def make_step_work(n_segments, n_points, n_insert):
                              np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(dof + 1))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def project_nullspace(J, r, work, out):
     """out = (I - J^T (J J^T + eps I)^-1 J) r for the 6 x dof tip Jacobian J."""
     A, B = work.A, work.B
@@ -120,7 +120,7 @@ def project_nullspace(J, r, work, out):
         out[k] = r[k] - acc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def view_fraction_at(p, gamma, cone):
     """Angle of point p (m, {w}) from the lens axis at endoscope rotation gamma, in half-angles."""
     xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, cone.d_o, cone.alpha, cone.model)

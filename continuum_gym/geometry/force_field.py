@@ -23,7 +23,7 @@ from continuum_gym.geometry.lens_cone import (
     to_lens_cs,
 )
 from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
-from continuum_gym.robots.mbcr_kernels import all_finite, frames_and_columns, make_workspace, points_kernel_framed
+from continuum_gym.robots.mbcr_kernels import all_finite, fill_frames, make_workspace, points_kernel_framed
 from continuum_gym.validation import as_finite, positive
 
 #: What the force kernels read: d0 (m), r_star (m), f_star (N) and the exponents p, q of eq (18).
@@ -102,11 +102,11 @@ def force_kernel_cs(px, py, pz, cg, sg, ca, sa, cb, sb, cone, field):
 @njit(cache=True)
 def potential_gradient_kernel(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
     """grad Pi (eq 12) for one q into ``grad`` (dof,); P, JV are (m, 3), (m, 3, dof) scratch."""
-    frames_and_columns(q, robot, ws)
+    fill_frames(q, robot, ws, True)
     potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
     """``potential_gradient_kernel`` with ``frames_and_columns`` of q already in ws (``tip_kernel`` leaves it)."""
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)

@@ -134,7 +134,7 @@ def cone_distance_slant_cs(xl, yl, zl, cb, sb):
     return cb * rho - sb * zl, sb * rho + cb * zl, rho
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def centre_distance_kernel(p, gamma, d_o, alpha, model):
     """(d_c, dd_c/dgamma) of the tip p (m): paper-notes §1.3 item 10 (d_c = rho_ee).
 

@@ -68,11 +68,13 @@ def frames_and_columns(q, robot, ws):
     fill_frames(q, robot, ws, True)
 
 
-# The kernels below take the workspace's arrays and row indices rather than the bundle or row views:
-# every array taken out of a tuple or sliced into a view is a reference count the compiler cannot
-# always prune, and those atomic updates were a quarter of an occlusion step.
+# Reference counts: a compiled function that calls another (not inlined) one keeps an atomic
+# incref / decref of every array it was passed, bundles included, because the call may raise; those
+# were a quarter of an occlusion step. So the kernels called per substep are leaves, their helpers
+# inlined ("always"), and they pass the workspace's arrays and row indices rather than row views.
 @njit(cache=True, inline="always")
 def fill_frames(q, robot, ws, with_columns):
+    """``frames`` (and with ``with_columns`` ``frames_and_columns``) inlined into the caller, which stays a leaf."""
     lengths = robot.lengths
     n = lengths.shape[0]
     R_base, g_base, p_local, Q, jv, jw, cs, V, W = ws.R_base, ws.g_base, ws.p_local, ws.Q, ws.jv, ws.jw, ws.cs, \
@@ -226,7 +228,7 @@ def tip_kernel(q, robot, ws, p, R, J):
     """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q.
 
     Leaves ``frames_and_columns`` of q in ws, which ``points_kernel_framed`` reuses."""
-    frames_and_columns(q, robot, ws)
+    fill_frames(q, robot, ws, True)
     lengths = robot.lengths
     n = lengths.shape[0]
     dof = q.shape[0]
@@ -270,7 +272,7 @@ def points_kernel(q, robot, ws, segments, fractions, P, JV):
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def points_kernel_framed(q, robot, ws, segments, fractions, P, JV):
     """``points_kernel`` with ``frames_and_columns`` of q already in ws (as ``tip_kernel`` leaves it)."""
     lengths = robot.lengths
@@ -309,7 +311,7 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
     k = 1..n on the others. With q_ins = 0 the inserted samples coincide with the origin, which is
     outside every cone, so the count stays fixed and batches keep one shape.
     """
-    frames(q, robot, ws)
+    fill_frames(q, robot, ws, False)
     lengths = robot.lengths
     n = lengths.shape[0]
     n_insert = robot.n_insert
