@@ -102,13 +102,13 @@ def force_kernel_cs(px, py, pz, cg, sg, ca, sa, cb, sb, cone, field):
 @njit(cache=True)
 def potential_gradient_kernel(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
     """grad Pi (eq 12) for one q into ``grad`` (dof,); P, JV are (m, 3), (m, 3, dof) scratch."""
-    fill_frames(q, robot, ws, True)
+    fill_frames(q, robot, ws)
     potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad)
 
 
 @njit(cache=True, inline="always")
 def potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
-    """``potential_gradient_kernel`` with ``frames_and_columns`` of q already in ws (``tip_kernel`` leaves it)."""
+    """``potential_gradient_kernel`` with the ``frames`` of q already in ws (``tip_kernel`` leaves it)."""
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
     dof = q.shape[0]
     for k in range(dof):

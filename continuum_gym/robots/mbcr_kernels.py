@@ -27,7 +27,7 @@ HALF_PI = 0.5 * math.pi
 MBCRKernelArgs = namedtuple("MBCRKernelArgs", ["lengths", "stiffness", "n_insert"])
 #: Scratch arrays of one robot: base frames R (n+1, 3, 3) and g (n+1, 3) of every segment, a local
 #: position and rotation, one segment's (3, 2) twist columns, (3, dof) point Jacobians, and what
-#: ``frames_and_columns`` keeps of each segment: cos / sin of delta (n, 2) and the world-frame twist
+#: ``frames`` keeps of each segment: cos / sin of delta (n, 2) and the world-frame twist
 #: columns of the whole segment, linear V (n + 1, 3, 2) and angular W (n + 1, 3, 2), theta column first
 #: (the last row holds one body point's own, partial segment).
 MBCRWorkspace = namedtuple("MBCRWorkspace", ["R_base", "g_base", "p_local", "Q", "jv", "jw", "Jv", "Jw",
@@ -54,18 +54,14 @@ def all_finite(x):
 
 @njit(cache=True)
 def frames(q, robot, ws):
-    """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected), and ws.cs."""
-    fill_frames(q, robot, ws, False)
+    """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected), ws.cs, and every
+    whole segment's world twist columns in ws.V, ws.W.
 
-
-@njit(cache=True)
-def frames_and_columns(q, robot, ws):
-    """``frames`` plus every whole segment's world twist columns in ws.V, ws.W (what all point Jacobians share).
-
-    A point's Jacobian then needs only its own segment's terms (``point_columns_framed``): the proximal
-    segments' columns are the same for every point, up to the lever arm.
+    The columns are what all point Jacobians share: a point then needs only its own segment's terms
+    (``point_columns_framed``); the proximal segments' columns are the same for every point, up to the
+    lever arm. They cost no transcendental beyond the frames' own.
     """
-    fill_frames(q, robot, ws, True)
+    fill_frames(q, robot, ws)
 
 
 # Reference counts: a compiled function that calls another (not inlined) one keeps an atomic
@@ -73,8 +69,8 @@ def frames_and_columns(q, robot, ws):
 # were a quarter of an occlusion step. So the kernels called per substep are leaves, their helpers
 # inlined ("always"), and they pass the workspace's arrays and row indices rather than row views.
 @njit(cache=True, inline="always")
-def fill_frames(q, robot, ws, with_columns):
-    """``frames`` (and with ``with_columns`` ``frames_and_columns``) inlined into the caller, which stays a leaf."""
+def fill_frames(q, robot, ws):
+    """``frames`` inlined into the caller, which stays a leaf."""
     lengths = robot.lengths
     n = lengths.shape[0]
     R_base, g_base, p_local, Q, jv, jw, cs, V, W = ws.R_base, ws.g_base, ws.p_local, ws.Q, ws.jv, ws.jw, ws.cs, \
@@ -94,9 +90,8 @@ def fill_frames(q, robot, ws, with_columns):
         cs[j, 0] = cd
         cs[j, 1] = sd
         length = lengths[j]
-        if with_columns:
-            segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, 1.0, jv, jw)
-            rotate_columns(R_base, j, jv, jw, V, W, j)
+        segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, 1.0, jv, jw)
+        rotate_columns(R_base, j, jv, jw, V, W, j)
         p_local[0] = length * cd * a
         p_local[1] = -length * sd * a
         p_local[2] = length * b
@@ -146,7 +141,7 @@ def rotate_columns(R_base, j, jv, jw, V, W, row):
 def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
     """Columns of the twist of a body point (segment, sigma) at world position ``point``.
 
-    Needs ``frames_and_columns`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
+    Needs ``frames`` filled in ``ws``. Proximal segments k < segment: R_{k-1} J_{k,v} +
     (g_k - point)^ R_{k-1} J_{k,w} (eq 4 corrected, paper-notes §1.2); own segment evaluated at sigma;
     distal columns 0; insertion column e3. ``Jw`` is filled only when ``with_angular``.
     """
@@ -227,8 +222,8 @@ def point_in_world(R_base, g_base, segment, length, cd, sd, a, b):
 def tip_kernel(q, robot, ws, p, R, J):
     """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q.
 
-    Leaves ``frames_and_columns`` of q in ws, which ``points_kernel_framed`` reuses."""
-    fill_frames(q, robot, ws, True)
+    Leaves the ``frames`` of q in ws, which ``points_kernel_framed`` reuses."""
+    fill_frames(q, robot, ws)
     lengths = robot.lengths
     n = lengths.shape[0]
     dof = q.shape[0]
@@ -268,13 +263,13 @@ def tip_single(q, lengths, stiffness, n_insert, p, R, J):
 @njit(cache=True)
 def points_kernel(q, robot, ws, segments, fractions, P, JV):
     """Positions (m, 3) and translational Jacobians (m, 3, dof) of body points, for one q."""
-    frames_and_columns(q, robot, ws)
+    fill_frames(q, robot, ws)
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
 
 
 @njit(cache=True, inline="always")
 def points_kernel_framed(q, robot, ws, segments, fractions, P, JV):
-    """``points_kernel`` with ``frames_and_columns`` of q already in ws (as ``tip_kernel`` leaves it)."""
+    """``points_kernel`` with the ``frames`` of q already in ws (as ``tip_kernel`` leaves it)."""
     lengths = robot.lengths
     R_base, g_base, cs, jv, jw, V, W, dummy = ws.R_base, ws.g_base, ws.cs, ws.jv, ws.jw, ws.V, ws.W, ws.Jw
     dof = q.shape[0]
@@ -311,7 +306,7 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
     k = 1..n on the others. With q_ins = 0 the inserted samples coincide with the origin, which is
     outside every cone, so the count stays fixed and batches keep one shape.
     """
-    fill_frames(q, robot, ws, False)
+    fill_frames(q, robot, ws)
     lengths = robot.lengths
     n = lengths.shape[0]
     n_insert = robot.n_insert
