@@ -16,7 +16,8 @@ Bit for bit holds on one *numerics platform*: the last bits of a float result al
 vector instructions (numpy's SIMD loops, OpenBLAS's LAPACK kernels behind the resolved-rate baseline's
 pseudo-inverse, torch's matmul kernels behind the shipped policies) and on those libraries' versions.
 The same code on an AVX2-only AMD EPYC differs from the reference set by up to 2e-13 in one env case
-and, through the closed loops of the policies, in the evaluation's last printed digit. So a platform
+and, through the closed loops of the policies, in the evaluation's last printed digit; an AVX-512 EPYC
+(znver5) whose OpenBLAS chose its Haswell kernels gives exactly the AVX2 machine's results. So a platform
 can have its own set, ``platforms/<key>/`` (``python tests/golden.py --platform``, recorded from the
 revision that last wrote the reference set, never from the code under test), compared bit for bit.
 A platform's set holds only the records that differ from the reference set; the others are read from it.
@@ -197,11 +198,17 @@ def run_evaluate(extra=()) -> dict:
 
 
 def numerics_platform() -> dict:
-    """What decides the last bits of a float result besides this code: CPU vector features, torch's kernel
-    level and the versions of the numerical libraries."""
+    """What decides the last bits of a float result besides this code: CPU vector features, the CPU model
+    numba compiles for, the kernel set OpenBLAS picked at run time (behind numpy's and scipy's LAPACK), libm,
+    torch's kernel level and the versions of the numerical libraries.
+
+    Two AMD EPYCs with the same vector features (numpy's list) but other models (LLVM's znver4 / znver5)
+    gave other last bits in the resolved-rate reproduction, so the model and the BLAS kernels are part of it.
+    """
     import platform
 
     import llvmlite
+    import llvmlite.binding
     import numba
     import scipy
     import torch
@@ -212,9 +219,28 @@ def numerics_platform() -> dict:
         from numpy.core._multiarray_umath import __cpu_features__
     return {"machine": platform.machine(), "python": ".".join(platform.python_version_tuple()[:2]),
             "simd": sorted(name for name, present in __cpu_features__.items() if present),
+            "llvm_cpu": llvmlite.binding.get_host_cpu_name(),
+            "blas_cores": {"numpy": openblas_core(np), "scipy": openblas_core(scipy)},
+            "libc": "-".join(platform.libc_ver()),
             "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
             "versions": {"numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
                          "llvmlite": llvmlite.__version__, "torch": torch.__version__}}
+
+
+def openblas_core(package) -> str:
+    """The kernel set (``Haswell``, ``SkylakeX``, ...) the OpenBLAS bundled with a numpy / scipy wheel chose
+    on this CPU; "unknown" for another BLAS."""
+    import ctypes
+
+    libs = Path(package.__file__).resolve().parent.parent / f"{package.__name__}.libs"
+    for library in sorted(libs.glob("lib*openblas*.so*")):
+        shared = ctypes.CDLL(str(library))
+        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename", "openblas_get_corename"):
+            if hasattr(shared, symbol):
+                function = getattr(shared, symbol)
+                function.restype = ctypes.c_char_p
+                return function().decode()
+    return "unknown"
 
 
 def platform_key(platform: dict) -> str:
