@@ -30,7 +30,7 @@ from continuum_gym.robots.endoscope import (
     endoscope_kinematics,
     make_endoscope_workspace,
 )
-from continuum_gym.robots.linalg import damped_gram_solve
+from continuum_gym.robots.linalg import gram_solve_3x6
 from continuum_gym.robots.rotations import orientation_error
 from continuum_gym.validation import as_finite, positive
 
@@ -51,7 +51,8 @@ ViewParams = namedtuple("ViewParams", ["method", "v_lim", "w_lim", "damping", "l
 #: Work arrays of one IK step: camera pose, target point, Jacobian, kinematics scratch, orientation-error
 #: scratch, capped twist, the Jacobian in mm, the active-column mask, solver scratch, the next configuration.
 ViewScratch = namedtuple("ViewScratch", ["p_cam", "R_ct", "p_ct", "J", "ws", "work33", "e_w", "twist", "Jmm", "mask",
-                                         "A3", "B3", "M6", "C", "q_new", "ones"])
+                                         "A3", "X3", "M6", "C", "q_new", "ones", "Jv", "Jw", "pv", "pc", "first",
+                                         "r"])
 
 
 @njit(cache=True)
@@ -65,7 +66,9 @@ def make_view_scratch():
     """Work arrays of ``view_rates_kernel`` (``ViewScratch``)."""
     return ViewScratch(np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6)), make_endoscope_workspace(),
                        np.empty((3, 3)), np.empty(3), np.empty(6), np.empty((6, 6)), np.empty(6), np.empty((3, 3)),
-                       np.empty((3, 6)), np.empty((6, 6)), np.empty((3, 6)), np.empty(6), np.ones(6))
+                       np.empty((3, 6)), np.empty((6, 6)), np.empty((3, 6)), np.empty(6), np.ones(6),
+                       np.empty((3, 6)), np.empty((3, 6)), np.empty((6, 3)), np.empty((6, 3)), np.empty(6),
+                       np.empty(3))
 
 
 @njit(cache=True)
@@ -81,15 +84,19 @@ def view_errors(q, p_tgt, R_tgt, robot, scratch):
     return eps_p, eps_r
 
 
-@njit(cache=True)
-def _damped_pinv_rows(A, damping, out, work3, ones):
-    """out (6 x 3) = A^T (A A^T + damping I)^-1 for A (3 x 6); undamped if damping == 0 and A A^T invertible."""
+# Inlined, with their work arrays in ``ViewScratch``: the DR loop runs these up to 7 times per step, and a
+# call or an allocation there costs more than its 3 x 6 arithmetic (see the reference-count note in
+# robots/mbcr_kernels.py).
+@njit(cache=True, inline="always")
+def damped_pinv_rows(A, damping, out, work3, ones, X):
+    """out (6 x 3) = A^T (A A^T + damping I)^-1 for A (3 x 6); undamped if damping == 0 and A A^T invertible.
+
+    X (3 x 6) is scratch."""
     # Solve (A A^T + damping I) X = A for X (3 x 6); then out = X^T.
-    X = np.empty((3, 6))
     for a in range(3):
         for k in range(6):
             X[a, k] = A[a, k]
-    ok = damped_gram_solve(A, ones, damping, work3, X)
+    ok = gram_solve_3x6(A, ones, damping, work3, X)
     for k in range(6):
         for a in range(3):
             out[k, a] = X[a, k] if ok else 0.0
@@ -120,6 +127,8 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
                 value /= MM_PER_M
             Jmm[a, k] = value
     frozen_bits = 0
+    # The limits are read into locals once: reading a bundle's array costs a reference count each time.
+    lower, upper = prm.lower, prm.upper
     if prm.method == RMRC:
         pinv = np.linalg.pinv(Jmm, rcond=1e-15)
         for k in range(6):
@@ -131,14 +140,14 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
         for k in range(6):
             mask[k] = 1.0
         for _ in range(DOF + 1):
-            _dr_solution(Jmm, twist, mask, prm.damping, scratch.A3, scratch.M6, scratch.C, scratch.ones, qdot)
+            dr_solution(Jmm, twist, mask, prm.damping, scratch, qdot)
             newly = False
             for k in range(6):
                 if mask[k] == 0.0:
                     continue
                 step = qdot[k] / MM_PER_M if k == 0 else qdot[k]
                 nxt = q[k] + step * dt
-                if nxt > prm.upper[k] or nxt < prm.lower[k]:
+                if nxt > upper[k] or nxt < lower[k]:
                     mask[k] = 0.0
                     frozen_bits |= 1 << k
                     newly = True
@@ -148,22 +157,20 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     return eps_p, eps_r, frozen_bits
 
 
-@njit(cache=True)
-def _dr_solution(Jmm, twist, mask, damping, A3, M6, C, ones, qdot):
+@njit(cache=True, inline="always")
+def dr_solution(Jmm, twist, mask, damping, scratch, qdot):
     """Eq (17) with the damped inverse of eq (19) on the active columns (mask); frozen rates are 0.
 
-    M6 holds N = I - J~v^+ J~v and C holds J~w N.
+    scratch.M6 holds N = I - J~v^+ J~v and scratch.C holds J~w N.
     """
-    Jv = np.empty((3, 6))
-    Jw = np.empty((3, 6))
+    A3, X3, M6, C, ones = scratch.A3, scratch.X3, scratch.M6, scratch.C, scratch.ones
+    Jv, Jw, pv, pc, first, r = scratch.Jv, scratch.Jw, scratch.pv, scratch.pc, scratch.first, scratch.r
     for a in range(3):
         for k in range(6):
             Jv[a, k] = Jmm[a, k] * mask[k]
             Jw[a, k] = Jmm[3 + a, k] * mask[k]
-    pv = np.empty((6, 3))
-    _damped_pinv_rows(Jv, damping, pv, A3, ones)
+    damped_pinv_rows(Jv, damping, pv, A3, ones, X3)
     # first = J~v^+ v
-    first = np.empty(6)
     for k in range(6):
         first[k] = pv[k, 0] * twist[0] + pv[k, 1] * twist[1] + pv[k, 2] * twist[2]
     # N = I - J~v^+ J~v ; C = J~w N
@@ -180,14 +187,12 @@ def _dr_solution(Jmm, twist, mask, damping, A3, M6, C, ones, qdot):
                 acc += Jw[a, k] * M6[k, m]
             C[a, m] = acc
     # residual orientation task: w - J~w J~v^+ v
-    r = np.empty(3)
     for a in range(3):
         acc = 0.0
         for k in range(6):
             acc += Jw[a, k] * first[k]
         r[a] = twist[3 + a] - acc
-    pc = np.empty((6, 3))
-    _damped_pinv_rows(C, damping, pc, A3, ones)
+    damped_pinv_rows(C, damping, pc, A3, ones, X3)
     for k in range(6):
         if mask[k] == 0.0:
             qdot[k] = 0.0

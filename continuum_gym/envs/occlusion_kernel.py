@@ -227,8 +227,9 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
         o[at + 9 + a] = v_des[a] / VELOCITY_SCALE
     o[at + 12] = view_fraction
     o[at + 13] = voi
+    rate_scale_vec = env.rate_scale_vec
     for k in range(dof + 1):
-        o[at + 14 + k] = base_cmd[i, k] / env.rate_scale_vec[k]
+        o[at + 14 + k] = base_cmd[i, k] / rate_scale_vec[k]
     o[at + 15 + dof] = t / (tasks.duration[i] * control_dt)
     clip_observation(o, OBS_LIMIT)
 
@@ -243,6 +244,11 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
         work.cmd
     p_des, v_des = work.p_des, work.v_des
+    # Arrays of the bundles that the substep loop reads are taken into locals once: each read of a
+    # bundle's array is an atomic reference count in a kernel that calls another (see mbcr_kernels).
+    tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
+    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
+    rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
     G = state.gamma
     dof = state.q.shape[1]
     dt = env.control_dt / env.substeps
@@ -258,8 +264,8 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     for k in range(dof + 1):
         action_sq += actions[i, k] * actions[i, k]
     for k in range(dof):
-        residual[k] = actions[i, k] * env.residual_scale * env.rate_scale_vec[k]
-    gamma_residual = actions[i, dof] * env.residual_scale * env.rate_scale_vec[dof]
+        residual[k] = actions[i, k] * env.residual_scale * rate_scale_vec[k]
+    gamma_residual = actions[i, dof] * env.residual_scale * rate_scale_vec[dof]
     for s in range(env.substeps):
         t = state.steps[i] * env.control_dt + s * dt
         if s == 0:
@@ -267,19 +273,19 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
                 qdot[k] = base_cmd[i, k]
             gd = base_cmd[i, dof]
             if env.has_base and env.nullspace:
-                tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
+                tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
         elif env.has_base and custom is not None:
             desired_point(tasks, i, t, p_des, v_des)
-            R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+            R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
             custom.rates[0](q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, custom.params, work.full_cmd)
             for k in range(dof):
                 qdot[k] = work.full_cmd[k]
             gd = work.full_cmd[dof]
             if env.nullspace:
-                tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
+                tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
         elif env.has_base:
             desired_point(tasks, i, t, p_des, v_des)
-            R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+            R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
             gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, R_des, v_des, dt, robot, prm, ws,
                                                             scratch, qdot)
             base_frozen |= frozen
@@ -290,7 +296,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
                 qdot[k] = 0.0
             gd = 0.0
         if env.has_base and env.nullspace:
-            project_nullspace(scratch.J, residual, work, projected)
+            project_nullspace(tip_J, residual, work, projected)
         else:
             for k in range(dof):
                 projected[k] = residual[k]
@@ -299,17 +305,17 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
         scale = 1.0
         for k in range(dof):
             cmd[k] = qdot[k] + projected[k]
-            if abs(cmd[k]) > env.rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > env.rate_limit[k]:
-                scale = env.rate_limit[k] / abs(cmd[k])
+            if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+                scale = rate_limit[k] / abs(cmd[k])
         if scale < 1.0:
             rate_saturated = 1
         for k in range(dof):
-            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, env.lower[k], env.upper[k])
+            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
             if hit:
                 clamped |= 1 << k
         if env.visibility_guard > 0.0 and gamma_residual != 0.0:
-            tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
-            g_rate, hit = guard_gamma_rate(scratch.p, G[i], gd, gamma_residual, dt, env.visibility_guard, prm.cone)
+            tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
+            g_rate, hit = guard_gamma_rate(tip_p, G[i], gd, gamma_residual, dt, env.visibility_guard, prm.cone)
             if hit:
                 guarded = 1
         else:

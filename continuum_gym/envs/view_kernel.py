@@ -62,23 +62,22 @@ ViewStepParams = namedtuple("ViewStepParams", ["control_dt", "has_base", "residu
 ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
 #: Per-thread scratch of ``view_step_row``.
 ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "dv_rate", "p_dv", "R_dv", "p_tgt",
-                                           "w", "turn", "R_goal"])
+                                           "w", "turn", "R_goal", "base_rates"])
 
 
 @njit(cache=True)
-def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch, out):
-    """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)]."""
+def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
+    """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
+
+    ``work`` is a ``ViewStepWork``: the step that calls this is done with its arrays (no allocation per row).
+    """
     q = state.q[i]
     control_dt = env.control_dt
     t = state.steps[i] * control_dt
-    q_dv = np.empty(4)
-    dv_rate = np.empty(4)
-    desired_point(tasks, i, t, q_dv, dv_rate)
-    p_dv = np.empty(3)
-    R_dv = np.empty((3, 3))
-    p_tgt = np.empty(3)
+    scratch, q_dv, p_dv, R_dv, p_tgt, qdot = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt, \
+        work.base_rates
+    desired_point(tasks, i, t, q_dv, work.dv_rate)
     davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
-    qdot = np.empty(6)
     base_cmd = out.base_cmd
     if env.has_base and custom is not None:
         custom.rates[0](q, p_tgt, R_dv, control_dt, robot, custom.params, qdot)
@@ -101,12 +100,13 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch,
     metrics[i, METRIC_POSITION_ERROR] = eps_p
     metrics[i, METRIC_ORIENTATION_ERROR] = eps_r
     o = out.obs[i]
-    o[0] = 2.0 * (q[0] - prm.lower[0]) / (prm.upper[0] - prm.lower[0]) - 1.0
+    lower, upper, action_scale = prm.lower, prm.upper, env.action_scale
+    o[0] = 2.0 * (q[0] - lower[0]) / (upper[0] - lower[0]) - 1.0
     o[1] = q[1] / math.pi
-    o[2] = 2.0 * (q[2] - prm.lower[2]) / (prm.upper[2] - prm.lower[2]) - 1.0
+    o[2] = 2.0 * (q[2] - lower[2]) / (upper[2] - lower[2]) - 1.0
     o[3] = math.sin(q[3])
     o[4] = math.cos(q[3])
-    o[5] = 2.0 * (q[4] - prm.lower[4]) / (prm.upper[4] - prm.lower[4]) - 1.0
+    o[5] = 2.0 * (q[4] - lower[4]) / (upper[4] - lower[4]) - 1.0
     o[6] = math.sin(q[5])
     o[7] = math.cos(q[5])
     for a in range(3):
@@ -114,7 +114,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch,
         o[11 + a] = e_w[a]
     o[14] = ratio
     for k in range(6):
-        o[15 + k] = base_cmd[i, k] / env.action_scale[k]
+        o[15 + k] = base_cmd[i, k] / action_scale[k]
     o[21] = t / (tasks.duration[i] * control_dt)
     if o.shape[0] > OBS_DIM:  # observe_target
         o[22] = (min(max(q_dv[0], dv.lower[0]), dv.upper[0]) - 0.05) / 0.05
@@ -128,7 +128,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch,
 @njit(cache=True)
 def make_view_step_work():
     return ViewStepWork(make_view_scratch(), np.empty(6), np.empty(6), np.empty(4), np.empty(4), np.empty(3),
-                        np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)))
+                        np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(6))
 
 
 @njit(cache=True)
@@ -171,12 +171,14 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
         for k in range(6):
             cmd[k] = base_cmd[i, k]
     else:
+        action_scale = env.action_scale
         for k in range(6):
-            cmd[k] = base_cmd[i, k] + actions[i, k] * env.residual_scale * env.action_scale[k]
+            cmd[k] = base_cmd[i, k] + actions[i, k] * env.residual_scale * action_scale[k]
     scale = 1.0
+    rate_limit = env.rate_limit  # a local: reading a bundle's array costs a reference count each time
     for k in range(6):
-        if abs(cmd[k]) > env.rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > env.rate_limit[k]:
-            scale = env.rate_limit[k] / abs(cmd[k])
+        if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+            scale = rate_limit[k] / abs(cmd[k])
     if scale < 1.0:
         for k in range(6):
             cmd[k] *= scale
@@ -184,7 +186,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
     for k in range(6):
         q[k] = q_new[k]
     state.steps[i] += 1
-    view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work.scratch, out)
+    view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
@@ -212,6 +214,6 @@ def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env,
 
 @njit(cache=True)
 def view_observe_batch(rows, state, tasks, robot, prm, dv, frustum, env, custom, out):
-    scratch = make_view_scratch()
+    work = make_view_step_work()
     for i in rows:
-        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, scratch, out)
+        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)

@@ -13,7 +13,7 @@ import math
 
 from numba import njit
 
-__all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve", "twist_gram_solve"]
+__all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve", "twist_gram_solve", "gram_solve_3x6"]
 
 
 @njit(cache=True)
@@ -91,3 +91,11 @@ def twist_gram_solve(J, mask, damping, A, B):
     """``damped_gram_solve`` for a 6-row (twist) Jacobian and a 6 x 2 right-hand side: sizes fixed at compile time."""
     gram_matrix_sized(J, mask, damping, A, 6, J.shape[1])
     return cholesky_solve_sized(A, B, 6, 2)
+
+
+@njit(cache=True, inline="always")
+def gram_solve_3x6(J, mask, damping, A, B):
+    """``damped_gram_solve`` for a 3 x 6 Jacobian and a 3 x 6 right-hand side (dimension-reduced IK's damped
+    inverses): sizes fixed at compile time."""
+    gram_matrix_sized(J, mask, damping, A, 3, 6)
+    return cholesky_solve_sized(A, B, 3, 6)
