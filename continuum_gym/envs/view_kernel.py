@@ -27,7 +27,7 @@ from continuum_gym.baselines.view_tracking import (
 )
 from continuum_gym.envs.common_kernels import clip_observation, desired_point
 from continuum_gym.envs.custom import row_reward
-from continuum_gym.geometry.overlap import overlap_ratio_nb
+from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio_in
 from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
 
@@ -62,7 +62,7 @@ ViewStepParams = namedtuple("ViewStepParams", ["control_dt", "has_base", "residu
 ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
 #: Per-thread scratch of ``view_step_row``.
 ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "dv_rate", "p_dv", "R_dv", "p_tgt",
-                                           "w", "turn", "R_goal", "base_rates"])
+                                           "w", "turn", "R_goal", "base_rates", "overlap"])
 
 
 @njit(cache=True)
@@ -94,7 +94,8 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
             base_cmd[i, k] = 0.0
     p_ct = scratch.p_ct
     e_w = scratch.e_w
-    ratio = overlap_ratio_nb(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near, frustum.far)
+    ratio = overlap_ratio_in(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near, frustum.far,
+                             work.overlap)
     metrics = out.metrics
     metrics[i, METRIC_OR] = ratio
     metrics[i, METRIC_POSITION_ERROR] = eps_p
@@ -128,7 +129,8 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
 @njit(cache=True)
 def make_view_step_work():
     return ViewStepWork(make_view_scratch(), np.empty(6), np.empty(6), np.empty(4), np.empty(4), np.empty(3),
-                        np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(6))
+                        np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(6),
+                        make_overlap_work())
 
 
 @njit(cache=True)

@@ -29,6 +29,8 @@ numba kernels (e.g. a whole environment step).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
@@ -37,7 +39,14 @@ from continuum_gym.geometry.frustum import FACE_VERTICES, Frustum
 __all__ = [
     "overlap_ratio",
     "overlap_ratio_nb",
+    "overlap_ratio_in",
+    "make_overlap_work",
+    "OverlapWork",
 ]
+
+#: Work arrays of one overlap-ratio evaluation: the frustum's camera-frame vertices (8, 3) and half-spaces
+#: (6, 4), then the clipping scratch of ``_workspace``.
+OverlapWork = namedtuple("OverlapWork", ["lv", "lh", "vb", "hb", "cut", "poly", "dist"])
 
 
 #: Two faces are treated as coplanar when their unit normals agree to this (max abs component) ...
@@ -324,6 +333,24 @@ def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
     _local_geometry(tan_half, near, far, lv, lh)
     vb, hb, cut, poly, dist = _workspace()
     return _overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
+
+
+@njit(cache=True)
+def make_overlap_work():
+    """An ``OverlapWork`` for :func:`overlap_ratio_in` (allocate once per batch, reuse for every row)."""
+    vb, hb, cut, poly, dist = _workspace()
+    return OverlapWork(np.empty((8, 3)), np.empty((6, 4)), vb, hb, cut, poly, dist)
+
+
+@njit(cache=True)
+def overlap_ratio_in(p_a, R_a, p_b, R_b, tan_half, near, far, work):
+    """:func:`overlap_ratio_nb` with its work arrays passed (an ``OverlapWork``): same arithmetic, no allocation.
+
+    Positions in m; for use inside other numba kernels that evaluate many pairs.
+    """
+    _local_geometry(tan_half, near, far, work.lv, work.lh)
+    return _overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, work.lv, work.lh, work.vb, work.hb, work.cut,
+                         work.poly, work.dist)
 
 
 _SINGLE_SIGNATURE = "float64(float64[::1], float64[:, ::1], float64[::1], float64[:, ::1], float64, float64, float64)"

@@ -13,7 +13,7 @@ from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from continuum_gym.geometry.frustum import FACE_VERTICES, Frustum
-from continuum_gym.geometry.overlap import overlap_ratio, overlap_ratio_nb
+from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio, overlap_ratio_in, overlap_ratio_nb
 from continuum_gym.geometry.overlap_reference import (
     overlap_ratio_monte_carlo,
     overlap_ratio_reference,
@@ -360,6 +360,23 @@ def test_numba_entry_point_callable_from_compiled_code():
 
     pose = _case(OVERLAP_CASES[2])
     assert twice(*pose) == pytest.approx(2.0 * OVERLAP_CASES[2]["overlap_ratio"], abs=2 * TOL)
+
+
+def test_reused_work_arrays_give_the_allocating_kernels_result_bit_for_bit():
+    # One OverlapWork over pairs of every kind (disjoint, partial, identical, other frustums): nothing
+    # left in it by one pair may change the next, so each result equals a fresh allocation's.
+    rng = np.random.default_rng(23)
+    work = make_overlap_work()
+    pairs = [_perturbed_pair(rng, max_angle=angle, max_shift=shift) for angle, shift in
+             [(0.0, 0.0), (0.3, 0.01), (1.0, 0.05), (3.0, 0.2)] * 10]
+    frustums = [(1.0, 0.03, 0.12), (0.4, 0.01, 0.3)]
+    values = []
+    for k, pair in enumerate(pairs):
+        tan_half, near, far = frustums[k % 2]
+        fresh = overlap_ratio_nb(*pair, tan_half, near, far)
+        assert overlap_ratio_in(*pair, tan_half, near, far, work) == fresh
+        values.append(fresh)
+    assert min(values) == 0.0 and max(values) == pytest.approx(1.0, abs=1e-12) and 0.05 < np.median(values) < 0.95
 
 
 def test_numpy_clipping_reference_agrees():

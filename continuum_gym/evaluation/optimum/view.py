@@ -30,7 +30,7 @@ from continuum_gym.evaluation.optimum.workers import (
     single_threaded_blas,
 )
 from continuum_gym.geometry import Frustum
-from continuum_gym.geometry.overlap import overlap_ratio, overlap_ratio_nb
+from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio, overlap_ratio_in, overlap_ratio_nb
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 from continuum_gym.robots.endoscope import (
     endoscope_kinematics,
@@ -59,9 +59,10 @@ def overlap_batch(Q, p_a, R_a, robot, tan_half, near, far, out):
     p_ct = np.empty(3)
     J = np.empty((6, 6))
     ws = make_endoscope_workspace()
+    work = make_overlap_work()
     for i in range(Q.shape[0]):
         endoscope_kinematics(Q[i], robot, ws, p_cam, R, p_ct, J, False)
-        out[i] = overlap_ratio_nb(p_a, R_a, p_cam, R, tan_half, near, far)
+        out[i] = overlap_ratio_in(p_a, R_a, p_cam, R, tan_half, near, far, work)
 
 
 @njit(cache=True)
