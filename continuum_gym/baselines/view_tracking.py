@@ -49,7 +49,8 @@ STALL_STEPS = 50
 #: eq (19) in mm units and the joint limits (6,).
 ViewParams = namedtuple("ViewParams", ["method", "v_lim", "w_lim", "damping", "lower", "upper"])
 #: Work arrays of one IK step: camera pose, target point, Jacobian, kinematics scratch, orientation-error
-#: scratch, capped twist, the Jacobian in mm, the active-column mask, solver scratch, the next configuration.
+#: scratch, capped twist, the Jacobian in mm, the active-column mask, solver scratch, the next configuration,
+#: a column of ones, and the dimension-reduced solution's masked Jacobians, damped inverses and partial results.
 ViewScratch = namedtuple("ViewScratch", ["p_cam", "R_ct", "p_ct", "J", "ws", "work33", "e_w", "twist", "Jmm", "mask",
                                          "A3", "X3", "M6", "C", "q_new", "ones", "Jv", "Jw", "pv", "pc", "first",
                                          "r"])
