@@ -202,8 +202,9 @@ def numerics_platform() -> dict:
     numba compiles for, the kernel set OpenBLAS picked at run time (behind numpy's and scipy's LAPACK), libm,
     torch's kernel level and the versions of the numerical libraries.
 
-    Two AMD EPYCs with the same vector features (numpy's list) but other models (LLVM's znver4 / znver5)
-    gave other last bits in the resolved-rate reproduction, so the model and the BLAS kernels are part of it.
+    Two AVX-512 AMD EPYCs with the same vector features (numpy's list) and library versions gave other last
+    bits (one, LLVM's znver5 with OpenBLAS's Haswell kernels, those of the AVX2 machine), so the CPU model and
+    the BLAS kernels are part of it.
     """
     import platform
 

@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 #: Work arrays of one overlap-ratio evaluation: the frustum's camera-frame vertices (8, 3) and half-spaces
-#: (6, 4), then the clipping scratch of ``_workspace``.
+#: (6, 4), then the clipping scratch of ``_overlap_pair`` (see ``make_overlap_work``).
 OverlapWork = namedtuple("OverlapWork", ["lv", "lh", "vb", "hb", "cut", "poly", "dist"])
 
 
@@ -131,9 +131,11 @@ def _local_geometry(t, near, far, verts, planes):
 
 
 @njit(cache=True)
-def _workspace():
-    """Scratch arrays for :func:`_overlap_pair` (allocate once, reuse over a batch)."""
-    return (
+def make_overlap_work():
+    """An ``OverlapWork`` for :func:`overlap_ratio_in` (allocate once, reuse over a batch)."""
+    return OverlapWork(
+        np.empty((8, 3)),  # lv: the frustum's camera-frame vertices
+        np.empty((6, 4)),  # lh: its camera-frame half-spaces
         np.empty((8, 3)),  # vb: vertices of b in frame a
         np.empty((6, 4)),  # hb: half-spaces of b in frame a
         np.empty((8, 6, 4)),  # cut: the 6 planes each face is clipped by (faces a-near, a-far, b0..b5)
@@ -328,18 +330,7 @@ def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
 
     For use inside other numba kernels; Python callers should use :func:`overlap_ratio`.
     """
-    lv = np.empty((8, 3))
-    lh = np.empty((6, 4))
-    _local_geometry(tan_half, near, far, lv, lh)
-    vb, hb, cut, poly, dist = _workspace()
-    return _overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
-
-
-@njit(cache=True)
-def make_overlap_work():
-    """An ``OverlapWork`` for :func:`overlap_ratio_in` (allocate once per batch, reuse for every row)."""
-    vb, hb, cut, poly, dist = _workspace()
-    return OverlapWork(np.empty((8, 3)), np.empty((6, 4)), vb, hb, cut, poly, dist)
+    return overlap_ratio_in(p_a, R_a, p_b, R_b, tan_half, near, far, make_overlap_work())
 
 
 @njit(cache=True)
@@ -385,12 +376,11 @@ def _overlap_batch(p_a, R_a, p_b, R_b, tan_half, near, far, out):
         code = _check_pose(p_b[k], R_b[k])
         if code != 0:
             return code + 3, k
-    lv = np.empty((8, 3))
-    lh = np.empty((6, 4))
-    _local_geometry(tan_half, near, far, lv, lh)
-    vb, hb, cut, poly, dist = _workspace()
+    work = make_overlap_work()
+    _local_geometry(tan_half, near, far, work.lv, work.lh)  # once: the frustum is the same for every pair
     for k in range(n):
-        out[k] = _overlap_pair(p_a[k], R_a[k], p_b[k], R_b[k], tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
+        out[k] = _overlap_pair(p_a[k], R_a[k], p_b[k], R_b[k], tan_half, near, far, work.lv, work.lh, work.vb,
+                               work.hb, work.cut, work.poly, work.dist)
     return 0, -1
 
 
