@@ -81,6 +81,7 @@ from revisions import (  # noqa: E402
     git,
     remove_worktree,
     resolve,
+    script_path,
     snapshot_working_tree,
     tree_env,
     working_tree_fingerprint,
@@ -124,10 +125,10 @@ def wait_for_quiet(below: float, patience: float) -> float:
 
 
 
-def run_script(python: str, tree: Tree, script: str, quick: bool, workdir: Path, others_before: float = math.nan
-               ) -> Run:
-    """Run ``<tree>/benchmarks/<script>.py --json <tmp>`` in a fresh subprocess; its parsed JSON."""
-    path = tree.path / "benchmarks" / f"{script}.py"
+def run_script(python: str, tree: Tree, script: str, quick: bool, workdir: Path, others_before: float = math.nan,
+               newest: Tree | None = None) -> Run:
+    """Run ``<tree>/benchmarks/<script>.py --json <tmp>`` (see ``script_path``) in a fresh subprocess; its JSON."""
+    path = script_path(tree, script, newest or tree)
     if not path.is_file():
         raise RuntimeError(f"{tree.label} tree ({tree.description}) has no benchmarks/{script}.py")
     out = workdir / f"{script}-{tree.label}.json"
@@ -218,13 +219,13 @@ def main(argv: list[str] | None = None) -> int:
         for t in trees:
             print(f"{t.label}: {t.description}\n     imports {sources[t.label]}")
         missing = [f"{t.label}: benchmarks/{s}.py" for t in trees for s in args.scripts
-                   if not (t.path / "benchmarks" / f"{s}.py").is_file()]
+                   if not script_path(t, s, new).is_file()]
         if missing:  # before a minute of compiling, not after
             raise RuntimeError(f"scripts missing in a tree: {', '.join(missing)}")
 
         for script in args.scripts:
             for t in trees:  # numba compiles into each tree's __pycache__ on the first run
-                warm = run_script(args.python, t, script, quick=True, workdir=workdir)
+                warm = run_script(args.python, t, script, quick=True, workdir=workdir, newest=new)
                 print(f"warm-up {script:<10} {t.label}: {warm.seconds:6.1f} s "
                       f"(others used {warm.others_during:.2f} cores)", flush=True)
 
@@ -240,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
                         quiet = (wait_for_quiet(args.idle_below, args.idle_wait) if args.idle_wait > 0
                                  else other_cores())
                         run = run_script(args.python, t, script, quick=args.quick, workdir=workdir,
-                                         others_before=quiet)
+                                         others_before=quiet, newest=new)
                         run.busy = run.others_during > args.idle_below
                         per_script[script].append(run)
                         print(f"[{count}/{total}] {script:<10} {t.label} run {repeat + 1}: {run.seconds:6.1f} s; "

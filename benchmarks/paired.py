@@ -1,6 +1,6 @@
 """Time two git revisions side by side: both trees at once, each pinned to its own core, then swapped.
 
-    python benchmarks/paired.py [--compare REV] [--new REV] [--old-tree PATH] [--scripts envs kinematics]
+    python benchmarks/paired.py [--compare REV] [--new REV] [--old-tree PATH] [--scripts envs kinematics memory]
                                 [--rounds 2] [--quick] [--json PATH]
 
 On a shared 2-vCPU VM the machine's speed drifts by tens of percent within minutes, so timing one tree
@@ -9,6 +9,8 @@ new tree's copy of a benchmark script *at the same time*, the old one pinned to 
 to core 1 (``taskset``), and the next round swaps the cores; both see the same drift and the same
 neighbours. Every run has ``NUMBA_NUM_THREADS=1``, so this measures one thread per tree: the threaded
 batch rows of ``envs.py`` are then single-threaded too, and thread scaling is not what is compared.
+
+A tree without a portable script (``revisions.PORTABLE_SCRIPTS``: ``memory``) runs the new tree's copy.
 
 Worktrees (``revisions.py``), the per-key best-of and the table (``ratios.py``) are those of ``compare.py``
 (same keys, units and flags).
@@ -35,14 +37,15 @@ from revisions import (  # noqa: E402
     check_import,
     git,
     remove_worktree,
+    script_path,
     tree_env,
 )
 
 
-def start(python: str, tree: Tree, script: str, core: int, quick: bool, workdir: Path):
+def start(python: str, tree: Tree, script: str, core: int, quick: bool, workdir: Path, newest: Tree):
     out = workdir / f"{script}-{tree.label}.json"
     out.unlink(missing_ok=True)
-    command = ["taskset", "-c", str(core), python, str(tree.path / "benchmarks" / f"{script}.py"), "--json",
+    command = ["taskset", "-c", str(core), python, str(script_path(tree, script, newest)), "--json",
                str(out)] + (["--quick"] if quick else [])
     env = dict(tree_env(tree), NUMBA_NUM_THREADS="1")
     return subprocess.Popen(command, cwd=tree.path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -61,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--compare", default=DEFAULT_REV, metavar="REV", help=f"old revision (default {DEFAULT_REV})")
     parser.add_argument("--new", default="HEAD", metavar="REV", help="new revision (default HEAD)")
     parser.add_argument("--old-tree", type=Path, help="an existing checkout of the old revision (reuses its cache)")
-    parser.add_argument("--scripts", nargs="+", default=["envs", "kinematics"])
+    parser.add_argument("--scripts", nargs="+", default=["envs", "kinematics", "memory"])
     parser.add_argument("--rounds", type=int, default=2, help="rounds per script, cores swapped each round")
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--json", type=Path)
@@ -90,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                 for round_ in range(-1, args.rounds):
                     cores = (0, 1) if round_ % 2 == 0 else (1, 0)
                     began = time.perf_counter()
-                    started = [start(python, tree, script, core, args.quick or round_ < 0, workdir)
+                    started = [start(python, tree, script, core, args.quick or round_ < 0, workdir, new)
                                for tree, core in zip((old, new), cores)]
                     done = [finish(proc, out, script, tree, began) for (proc, out), tree in zip(started, (old, new))]
                     label = "warm-up" if round_ < 0 else f"round {round_ + 1}/{args.rounds}"

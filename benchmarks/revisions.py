@@ -122,6 +122,18 @@ def remove_worktree(tree: Tree) -> None:
 
 
 # ---------------------------------------------------------------------------------------------- runs
+#: Scripts that use public names only, so a tree that predates them runs the newest tree's copy.
+PORTABLE_SCRIPTS = ("memory",)
+
+
+def script_path(tree: Tree, script: str, newest: Tree) -> Path:
+    """``<tree>/benchmarks/<script>.py``, or ``newest``'s copy of a portable script ``tree`` lacks."""
+    own = tree.path / "benchmarks" / f"{script}.py"
+    if own.is_file() or script not in PORTABLE_SCRIPTS:
+        return own
+    return newest.path / "benchmarks" / f"{script}.py"
+
+
 def tree_env(tree: Tree) -> dict[str, str]:
     """The environment of a run in ``tree``: its sources first on sys.path, nothing else inherited there."""
     env = dict(os.environ)
