@@ -85,6 +85,7 @@ class OcclusionCore(BatchedCore):
     spec = OCCLUSION_SPEC
     config_class = OcclusionConfig
     builtin_reward_names = REWARD_TERMS
+    observe_kernel = staticmethod(occlusion_observe_batch)
     step_kernel = staticmethod(occlusion_step_batch)
     supports_pixel_occlusion = True
     info_fields = INFO_FIELDS
@@ -163,8 +164,8 @@ class OcclusionCore(BatchedCore):
 
     def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
-        occlusion_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
-                                self._custom, self._out)
+        self._observe_call(np.asarray(rows, dtype=np.int64),
+                           (self._state, self._tasks, *self._model, self._env, self._custom, self._out))
 
     def step(self, actions: np.ndarray, active: np.ndarray):
         self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,

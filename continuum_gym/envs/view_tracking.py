@@ -72,6 +72,7 @@ class ViewTrackingCore(BatchedCore):
     spec = VIEW_SPEC
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
+    observe_kernel = staticmethod(view_observe_batch)
     step_kernel = staticmethod(view_step_batch)
     info_fields = INFO_FIELDS
     metric_columns = {"overlap_ratio": METRIC_OR, "position_error_m": METRIC_POSITION_ERROR,
@@ -140,8 +141,8 @@ class ViewTrackingCore(BatchedCore):
 
     def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
-        view_observe_batch(np.asarray(rows, dtype=np.int64), self._state, self._tasks, *self._model, self._env,
-                           self._custom, self._out)
+        self._observe_call(np.asarray(rows, dtype=np.int64),
+                           (self._state, self._tasks, *self._model, self._env, self._custom, self._out))
 
     def step(self, actions: np.ndarray, active: np.ndarray):
         self._step_call((self._state, actions, active, self._tasks, *self._model, self._env, self._custom,

@@ -495,6 +495,35 @@ def test_the_step_entry_point_and_the_dispatcher_agree(env_id, k):
         np.testing.assert_array_equal(cores[0].rewards, other.rewards)
 
 
+@pytest.mark.parametrize("env_id", ["ContinuumGym/OcclusionAvoidance-v0", "ContinuumGym/ViewTracking-v0"])
+def test_the_observe_entry_point_and_the_dispatcher_agree(env_id):
+    """observe_rows calls its kernel's entry point directly; strided rows take the dispatcher. Both give
+    the same bits, and the entry point is typed again for task arrays that were replaced (grown)."""
+    from continuum_gym.envs.common_kernels import task_arrays
+    from continuum_gym.envs.tasks import grown
+    from continuum_gym.evaluation.rollout import make_core
+
+    cores = [make_core(env_id, 3, task="random") for _ in range(3)]
+    for core in cores:
+        core.reset_rows(np.arange(3), np.arange(3))
+        core.q += 0.01 * np.random.default_rng(1).standard_normal(core.q.shape)
+        core.obs[:] = np.nan
+    cores[0].observe_rows(np.arange(3))
+    # rows 0, 1, 2 as a view of stride 2: the dispatcher path
+    strided = np.lib.stride_tricks.as_strided(np.repeat(np.arange(3), 2), (3,), (16,))
+    assert not strided.flags.c_contiguous and strided.tolist() == [0, 1, 2]
+    cores[1].observe_rows(strided)
+    cores[2].tasks = grown(cores[2].tasks, 5)
+    cores[2]._tasks = task_arrays(cores[2].tasks, cores[2].limit)
+    cores[2].observe_rows(np.arange(3))
+    assert cores[0]._observe_call.entry is not None
+    assert cores[2]._observe_call.typed_for[1] is cores[2]._tasks
+    assert np.all(np.isfinite(cores[0].obs))
+    for other in cores[1:]:
+        np.testing.assert_array_equal(cores[0].obs, other.obs)
+        np.testing.assert_array_equal(cores[0].base_cmd, other.base_cmd)
+
+
 def test_episodes_last_their_tasks_duration_with_no_registered_cut():
     """No TimeLimit: a 15 s recording at control_dt 5 ms runs its 3000 steps, and says so up front."""
     from continuum_gym.envs import TipTrajectory
