@@ -316,16 +316,17 @@ class BatchedCore:
     def _install_tasks(self, rows, fresh) -> None:
         """Copy freshly drawn task instances into ``rows`` and restart their episodes (state from the task)."""
         from continuum_gym.envs.common_kernels import task_arrays
-        from continuum_gym.envs.tasks import copy_rows, grown
+        from continuum_gym.envs.tasks import copy_rows, grown, row_indices
 
         if fresh.knot_capacity > self.tasks.knot_capacity:  # a longer recording than any before: grow every row
             self.tasks = grown(self.tasks, fresh.knot_capacity)
             self._tasks = task_arrays(self.tasks, self.limit)
         copy_rows(self.tasks, rows, fresh)
-        self.limit[rows] = fresh.duration
+        rows, source = row_indices(rows, len(fresh.task_id))
+        self.limit[rows] = fresh.duration[source]
         if self.max_episode_steps is not None:
-            self.limit[rows] = np.minimum(fresh.duration, self.max_episode_steps)
-        self.q[rows] = fresh.start_q
+            self.limit[rows] = np.minimum(fresh.duration[source], self.max_episode_steps)
+        self.q[rows] = fresh.start_q[source]
         self.steps[rows] = 0
         self.flags[rows] = 0
         self.terms[rows] = 0.0

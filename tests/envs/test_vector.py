@@ -244,3 +244,31 @@ def test_stepping_a_batch_leaves_the_process_openmp_thread_count_alone():
     batch_threads, torch_threads = map(int, done.stdout.split())
     assert batch_threads == 2  # the batch itself was stepped on two threads
     assert torch_threads == 1
+
+
+def test_one_row_task_copies_equal_index_array_copies():
+    """copy_rows' plain-index path for one row (a single env's reset) writes what an index array writes,
+    also when the source is a recording whose knots must be padded to the target's capacity."""
+    from continuum_gym.envs.task_sources import trajectory_rows
+    from continuum_gym.envs.tasks import TaskContext, copy_rows, empty_batch, grown
+    from continuum_gym.envs.trajectories import TipTrajectory
+    from continuum_gym.robots.mbcr import MultiBackboneRobot
+
+    robot = MultiBackboneRobot()
+    context = TaskContext(robot, 0.005)
+    rng = np.random.default_rng(3)
+    t = np.linspace(0.0, 1.0, 6)
+    short = TipTrajectory(t, 0.03 + 0.002 * rng.standard_normal((6, 3)), start_q=robot.psi_a)
+    long = TipTrajectory(np.linspace(0.0, 2.0, 9), 0.03 + 0.002 * rng.standard_normal((9, 3)), start_q=robot.psi_a)
+    sources = [trajectory_rows([short], [0], context), trajectory_rows([long], [0], context)]
+    before = rng.standard_normal((4, robot.dof))  # other rows' contents, which must stay
+    targets = []
+    for rows in (np.array([2]), [2]):  # a one-row index array (plain indexing) and a list (numpy's fancy indexing)
+        target = grown(empty_batch(4, robot.dof, 3), 9)
+        target.start_q[:] = before
+        for source in sources:
+            copy_rows(target, rows, source)
+        targets.append(target)
+    assert targets[0].n_knots[2] == 9 and np.array_equal(targets[0].start_q[[0, 1, 3]], before[[0, 1, 3]])
+    for name in vars(targets[0]):
+        np.testing.assert_array_equal(getattr(targets[0], name), getattr(targets[1], name), err_msg=name)
