@@ -376,11 +376,12 @@ def _overlap_batch(p_a, R_a, p_b, R_b, tan_half, near, far, out):
         code = _check_pose(p_b[k], R_b[k])
         if code != 0:
             return code + 3, k
-    work = make_overlap_work()
-    _local_geometry(tan_half, near, far, work.lv, work.lh)  # once: the frustum is the same for every pair
+    # The work's arrays as locals: a bundle's array read inside the loop costs an atomic reference count
+    # per read (~7 % of this loop when they were read there).
+    lv, lh, vb, hb, cut, poly, dist = make_overlap_work()
+    _local_geometry(tan_half, near, far, lv, lh)  # once: the frustum is the same for every pair
     for k in range(n):
-        out[k] = _overlap_pair(p_a[k], R_a[k], p_b[k], R_b[k], tan_half, near, far, work.lv, work.lh, work.vb,
-                               work.hb, work.cut, work.poly, work.dist)
+        out[k] = _overlap_pair(p_a[k], R_a[k], p_b[k], R_b[k], tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
     return 0, -1
 
 
