@@ -351,9 +351,20 @@ _BATCH_SIGNATURE = (
 )
 
 
-# The two Python entry points are compiled once for C-contiguous writable float64 arrays (eagerly,
-# cached on disk), so unusual inputs (views, read-only arrays) never trigger new compilations.
-@njit(_SINGLE_SIGNATURE, cache=True)
+def _compiled(dispatcher, signature: str):
+    """``dispatcher`` compiled for ``signature`` (C-contiguous writable float64 arrays) and closed to any other.
+
+    So unusual inputs (views, read-only arrays) never trigger new compilations. On first use, not at
+    import (as a signature in the decorator would): an OcclusionAvoidance user never pays its ~4.6 s of
+    compiling on an empty cache.
+    """
+    if not dispatcher.signatures:
+        dispatcher.compile(signature)
+        dispatcher.disable_compile()
+    return dispatcher
+
+
+@njit(cache=True)
 def _overlap_single(p_a, R_a, p_b, R_b, tan_half, near, far):
     """OR of one pair, or −(error code) if an input is invalid."""
     code = _check_pose(p_a, R_a)
@@ -365,7 +376,7 @@ def _overlap_single(p_a, R_a, p_b, R_b, tan_half, near, far):
     return overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far)
 
 
-@njit(_BATCH_SIGNATURE, cache=True)
+@njit(cache=True)
 def _overlap_batch(p_a, R_a, p_b, R_b, tan_half, near, far, out):
     """OR of N pairs (p: (N, 3), R: (N, 3, 3)) into out (N,); returns (error code, index) or (0, -1)."""
     n = out.shape[0]
@@ -434,10 +445,11 @@ def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndar
     p_b = _float_array(p_b, "p_b")
     R_b = _float_array(R_b, "R_b")
     if p_a.shape == (3,) and p_b.shape == (3,) and R_a.shape == (3, 3) and R_b.shape == (3, 3):
+        single = _compiled(_overlap_single, _SINGLE_SIGNATURE)
         try:
-            value = _overlap_single(p_a, R_a, p_b, R_b, frustum.tan_half, frustum.near, frustum.far)
+            value = single(p_a, R_a, p_b, R_b, frustum.tan_half, frustum.near, frustum.far)
         except TypeError:  # views or read-only arrays: the kernel takes C-contiguous writable arrays
-            value = _overlap_single(
+            value = single(
                 np.array(p_a, order="C"), np.array(R_a, order="C"), np.array(p_b, order="C"),
                 np.array(R_b, order="C"), frustum.tan_half, frustum.near, frustum.far,
             )
@@ -463,7 +475,7 @@ def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndar
         return np.array(np.broadcast_to(array, batch + tail), order="C").reshape((n,) + tail)
 
     out = np.empty(n)
-    code, index = _overlap_batch(
+    code, index = _compiled(_overlap_batch, _BATCH_SIGNATURE)(
         flat(p_a, (3,)), flat(R_a, (3, 3)), flat(p_b, (3,)), flat(R_b, (3, 3)),
         frustum.tan_half, frustum.near, frustum.far, out,
     )
