@@ -117,7 +117,6 @@ def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int, threads: in
 
 _FLOAT64 = np.dtype(np.float64)
 _UINT8 = np.dtype(np.uint8)
-_INT64 = np.dtype(np.int64)
 
 
 def _is_kernel_array(array, dtype: np.dtype, ndim: int) -> bool:
@@ -154,32 +153,6 @@ class KernelCall:
             run_in_chunks(self.entry, args, num_rows, n_chunks, threads)
 
 
-class RowsKernelCall:
-    """An observe kernel ``kernel(rows, *bundles)`` called without numba's per-call type dispatch.
-
-    As ``KernelCall``, for the reset path (~9 us of dispatch per reset, as much as ViewTracking's
-    observation of one row). The entry point is looked up again whenever a bundle is another object
-    than the one it was typed for (a core replaces its task arrays when a longer recording arrives,
-    and rebuilds its model bundles on unpickling), so it never runs on arrays of another type.
-    """
-
-    def __init__(self, kernel) -> None:
-        self.kernel = kernel
-        self.entry = None
-        self.typed_for: tuple = ()
-
-    def __call__(self, rows: np.ndarray, bundles: tuple) -> None:
-        if not _is_kernel_array(rows, _INT64, 1):
-            self.kernel(rows, *bundles)
-            return
-        if len(bundles) != len(self.typed_for) or any(a is not b for a, b in zip(bundles, self.typed_for)):
-            signature = tuple(self.kernel.typeof_pyval(value) for value in (rows, *bundles))
-            self.kernel.compile(signature)
-            self.entry = self.kernel.overloads[signature].entry_point
-            self.typed_for = bundles
-        self.entry(rows, *bundles)
-
-
 class BatchedCore:
     """Interface of a batched core (see ``OcclusionCore``); documented here once.
 
@@ -191,7 +164,6 @@ class BatchedCore:
     spec = None
     config_class: type = None
     step_kernel = None  #: the compiled ``*_step_batch`` of the core
-    observe_kernel = None  #: the compiled ``*_observe_batch`` of the core
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     builtin_reward_names: tuple = ()
     info_fields: tuple = ()
@@ -258,7 +230,6 @@ class BatchedCore:
         self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._step_call = KernelCall(self.step_kernel)
-        self._observe_call = RowsKernelCall(self.observe_kernel)
 
     def __getstate__(self) -> dict:
         # numba's typed lists do not pickle; the slots are rebuilt from the registry on unpickling
@@ -266,7 +237,6 @@ class BatchedCore:
         state.pop("_custom", None)
         state.pop("_reward_slot", None)
         state.pop("_step_call", None)  # a compiled entry point: looked up again after unpickling
-        state.pop("_observe_call", None)
         state.pop("_info_row_reader", None)  # generated code: found again on first use
         return state
 
@@ -274,6 +244,30 @@ class BatchedCore:
         self.__dict__.update(state)
         self._model = self.kernel_model()  # read-only robot arrays again (unpickled ones are writeable)
         self._make_slots()
+
+    def kernel_args(self, actions: np.ndarray, active: np.ndarray) -> tuple:
+        """The step kernel's bundles around the per-step ``actions`` (N or 1, k) and ``active`` (N,) uint8."""
+        return (self._state, actions, active, self._tasks, *self._model, self._env, self._custom, self._reward_slot,
+                self._out)
+
+    def observe_rows(self, rows) -> None:
+        """Recompute observation, metrics and the cached baseline command of ``rows`` from their state.
+
+        The step kernel does it for rows marked ``OBSERVE_ONLY`` (it reads no action for them): one
+        compiled kernel holds both, so a process loads the observation's code once (an observe kernel of
+        its own had added 7.0 MiB of RSS to OcclusionAvoidance and 2 s to its first compile).
+        """
+        from continuum_gym.envs.common_kernels import OBSERVE_ONLY
+
+        mask = self.__dict__.get("_observe_mask")
+        if mask is None or mask.shape[0] != self.num_envs:
+            mask = self._observe_mask = np.zeros(self.num_envs, dtype=np.uint8)
+            self._no_actions = np.zeros((1,) + self.single_action_space.shape)
+        mask[rows] = OBSERVE_ONLY
+        try:
+            self._step_call(self.kernel_args(self._no_actions, mask), self._no_actions, mask, self.num_envs, 1)
+        finally:
+            mask[rows] = 0
 
     def kernel_model(self) -> tuple:  # pragma: no cover - interface
         """The model bundles of the step kernels: the robot's and the controller's (and the cameras')."""

@@ -16,6 +16,9 @@ from continuum_gym.robots.rotations import rotation_exp
 #: sines (centre, amp, omega, phase) or, where ``n_knots > 0``, a cubic Hermite spline (knot times,
 #: values, slopes; for the orientation rotation vectors relative to R_des); the desired tip orientation
 #: R_des; the task's duration and the episode's step limit (both in control steps).
+#: ``active`` value of a row the step kernels observe at its state instead of stepping (``observe_rows``).
+OBSERVE_ONLY = 2
+
 TaskArrays = namedtuple("TaskArrays", ["centre", "amp", "omega", "phase", "R_des", "duration", "limit", "n_knots",
                                        "knot_t", "knot_x", "knot_m", "knot_r", "knot_rm"])
 

@@ -27,6 +27,7 @@ from continuum_gym.baselines.occlusion_kernels import (
     wrap_angle,
 )
 from continuum_gym.envs.common_kernels import (
+    OBSERVE_ONLY,
     clamp,
     clip_observation,
     desired_point,
@@ -354,24 +355,21 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
 
 @njit(cache=True, nogil=True)
 def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, start, stop):
-    """Advance every active row in [start, stop) by one control step.
+    """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
+    ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).
 
+    One kernel for both, so a process loads the observation's compiled code once, inside the step's.
     Releases the GIL, so ``BatchedCore`` steps row chunks on several threads; rows are independent and
     each is computed by the same row function, so chunked results equal serial ones bit for bit.
     """
     work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
     for i in range(start, stop):
-        if active[i] != 0:
+        mode = active[i]
+        if mode == OBSERVE_ONLY:
+            occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+        elif mode != 0:
             occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work)
 
 
-@njit(cache=True)
-def occlusion_observe_batch(rows, state, tasks, robot, prm, env, custom, out):
-    """Recompute observation, metrics and the cached baseline command of ``rows`` from their state."""
-    work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
-    for i in rows:
-        occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
-
-
-__all__ = ["occlusion_step_batch", "occlusion_observe_batch", "REWARD_TERMS",
+__all__ = ["occlusion_step_batch", "REWARD_TERMS",
            "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]

@@ -25,7 +25,7 @@ from continuum_gym.baselines.view_tracking import (
     view_errors,
     view_rates_kernel,
 )
-from continuum_gym.envs.common_kernels import clip_observation, desired_point
+from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio_in
 from continuum_gym.robots.davinci import davinci_pose
@@ -207,15 +207,12 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
 
 @njit(cache=True, nogil=True)
 def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, start, stop):
-    """Advance every active row in [start, stop) by one control step (releases the GIL: see occlusion_kernel)."""
+    """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
+    marked ``OBSERVE_ONLY`` (releases the GIL; see occlusion_kernel)."""
     work = make_view_step_work()
     for i in range(start, stop):
-        if active[i] != 0:
+        mode = active[i]
+        if mode == OBSERVE_ONLY:
+            view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
+        elif mode != 0:
             view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work)
-
-
-@njit(cache=True)
-def view_observe_batch(rows, state, tasks, robot, prm, dv, frustum, env, custom, out):
-    work = make_view_step_work()
-    for i in rows:
-        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)

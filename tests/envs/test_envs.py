@@ -496,32 +496,32 @@ def test_the_step_entry_point_and_the_dispatcher_agree(env_id, k):
 
 
 @pytest.mark.parametrize("env_id", ["ContinuumGym/OcclusionAvoidance-v0", "ContinuumGym/ViewTracking-v0"])
-def test_the_observe_entry_point_and_the_dispatcher_agree(env_id):
-    """observe_rows calls its kernel's entry point directly; strided rows take the dispatcher. Both give
-    the same bits, and the entry point is typed again for task arrays that were replaced (grown)."""
-    from continuum_gym.envs.common_kernels import task_arrays
-    from continuum_gym.envs.tasks import grown
+def test_observing_rows_through_the_step_kernel_touches_only_those_rows(env_id):
+    """observe_rows runs the step kernel with its rows marked OBSERVE_ONLY: those rows get the observation
+    of their state (the same bits whichever other rows are observed with them, pickled or not); every other
+    row, and every step counter, reward and flag, stays as it was."""
     from continuum_gym.evaluation.rollout import make_core
 
-    cores = [make_core(env_id, 3, task="random") for _ in range(3)]
+    cores = [make_core(env_id, 4, task="random") for _ in range(3)]
+    shift = 0.01 * np.random.default_rng(1).standard_normal(cores[0].q.shape)
     for core in cores:
-        core.reset_rows(np.arange(3), np.arange(3))
-        core.q += 0.01 * np.random.default_rng(1).standard_normal(core.q.shape)
-        core.obs[:] = np.nan
-    cores[0].observe_rows(np.arange(3))
-    # rows 0, 1, 2 as a view of stride 2: the dispatcher path
-    strided = np.lib.stride_tricks.as_strided(np.repeat(np.arange(3), 2), (3,), (16,))
-    assert not strided.flags.c_contiguous and strided.tolist() == [0, 1, 2]
-    cores[1].observe_rows(strided)
-    cores[2].tasks = grown(cores[2].tasks, 5)
-    cores[2]._tasks = task_arrays(cores[2].tasks, cores[2].limit)
-    cores[2].observe_rows(np.arange(3))
-    assert cores[0]._observe_call.entry is not None
-    assert cores[2]._observe_call.typed_for[1] is cores[2]._tasks
-    assert np.all(np.isfinite(cores[0].obs))
+        core.reset_rows(np.arange(4), np.arange(4))
+        active = np.ones(4, dtype=np.uint8)
+        core.step(np.zeros((4,) + core.single_action_space.shape), active)
+        core.q += shift
+    cores[2] = pickle.loads(pickle.dumps(cores[2]))
+    before = {name: getattr(cores[0], name).copy() for name in ("obs", "steps", "rewards", "flags", "terms")}
+    cores[0].observe_rows(np.array([1, 3]))
+    cores[1].observe_rows(np.arange(4))
+    cores[2].observe_rows([3, 1])
+    assert not cores[0]._observe_mask.any()
+    for name in ("steps", "rewards", "flags", "terms"):
+        np.testing.assert_array_equal(getattr(cores[0], name), before[name])
+    np.testing.assert_array_equal(cores[0].obs[[0, 2]], before["obs"][[0, 2]])
+    assert not np.array_equal(cores[0].obs[[1, 3]], before["obs"][[1, 3]])  # the shifted state was observed
     for other in cores[1:]:
-        np.testing.assert_array_equal(cores[0].obs, other.obs)
-        np.testing.assert_array_equal(cores[0].base_cmd, other.base_cmd)
+        np.testing.assert_array_equal(cores[0].obs[[1, 3]], other.obs[[1, 3]])
+        np.testing.assert_array_equal(cores[0].base_cmd[[1, 3]], other.base_cmd[[1, 3]])
 
 
 def test_episodes_last_their_tasks_duration_with_no_registered_cut():
