@@ -203,7 +203,11 @@ class BatchedCore:
         raise NotImplementedError
 
     def step(self, actions: np.ndarray, active: np.ndarray):  # pragma: no cover - interface
-        """Returns (rewards, terminated, truncated) arrays and fills ``self.obs``."""
+        """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
+
+        Returns (rewards, terminated, truncated) arrays and fills ``self.obs``. The value 2
+        (``OBSERVE_ONLY``) is reserved for ``observe_rows``: such a row is observed, not stepped.
+        """
         raise NotImplementedError
 
     def _setup_rewards(self) -> None:
