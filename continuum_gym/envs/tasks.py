@@ -187,7 +187,7 @@ def hold_start_pool(split: str, max_bend: float, insertion: tuple, robot: MultiB
                 continue
             tip, _ = robot.forward_kinematics(q)
             tip_angle = cone_coordinates(tip, 0.0, cone)["angle"]
-            P, _ = robot.points_jacobians(q, psps)
+            P = robot.points(q, psps)
             psp = cone_coordinates(P, 0.0, cone)
             psp_share = np.mean((psp["d"] <= 0) & (psp["r"] > 0), axis=-1)
             keep = (tip_angle <= VISIBILITY_FRACTION * cone.beta) & (psp_share >= psps_inside)

@@ -34,6 +34,7 @@ from continuum_gym.robots.mbcr_kernels import (  # noqa: F401  (the kernels' nam
     point_columns,
     points_batch,
     points_kernel,
+    positions_batch,
     tip_batch,
     tip_kernel,
     tip_single,
@@ -298,6 +299,17 @@ class MultiBackboneRobot:
         if not points_batch(flat, self.kernel_args(), segments, fractions, P, JV):
             _raise_not_finite(q)
         return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, self.dof))
+
+    def points(self, q: ArrayLike, points=PAPER_PSPS) -> np.ndarray:
+        """Positions (..., m, 3) in m of body points (segment, fraction): those of ``points_jacobians``,
+        bit for bit, without computing the Jacobians."""
+        segments, fractions = self.point_spec(points)
+        q, batch, flat = self._flat(q)
+        m = segments.shape[0]
+        P = np.empty((flat.shape[0], m, 3))
+        if not positions_batch(flat, self.kernel_args(), segments, fractions, P):
+            _raise_not_finite(q)
+        return P.reshape(batch + (m, 3))
 
     def backbone(self, q: ArrayLike, n_per_segment: int = 40) -> np.ndarray:
         """Sampled backbone from the channel exit, as paper-notes §1.3 item 13 samples it for VOI.

@@ -252,3 +252,23 @@ def test_the_single_configuration_path_equals_the_batch_path():
     bad[3] = np.nan
     with pytest.raises(ValueError, match="finite"):
         robot.forward_kinematics_and_jacobian(bad)
+
+
+@pytest.mark.parametrize("lengths", [(0.03,), (0.02, 0.02, 0.02), (0.02, 0.018, 0.016, 0.014)])
+def test_positions_only_equal_the_jacobian_kernels_positions_bit_for_bit(lengths):
+    """``points`` (no Jacobians) is the hold-start search's path; it must give exactly the positions of
+    ``points_jacobians``, for robots of 1-4 segments, any batch shape, and refuse NaN naming q."""
+    robot = MultiBackboneRobot(lengths=lengths)
+    n_segments = robot.n_segments
+    rng = np.random.default_rng(n_segments)
+    q = np.empty((2, 5, robot.dof))
+    q[..., 0:2 * n_segments:2] = math.pi / 2 - rng.uniform(0.05, 1.2, (2, 5, n_segments))
+    q[..., 1:2 * n_segments:2] = rng.uniform(-math.pi, math.pi, (2, 5, n_segments))
+    q[..., 2 * n_segments] = rng.uniform(0.0, 0.02, (2, 5))
+    points = [(k, f) for k in range(n_segments) for f in (0.0, 0.35, 1.0)]
+    P, _ = robot.points_jacobians(q, points)
+    np.testing.assert_array_equal(robot.points(q, points), P)
+    assert robot.points(q[0, 0], points).shape == (len(points), 3)
+    q[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="q"):
+        robot.points(q, points)
