@@ -41,6 +41,8 @@ test-fast: setup-test
 
 bench: setup-test
 	$(BIN)/python benchmarks/kinematics.py --json results/bench/kinematics.json
+	$(BIN)/python benchmarks/envs.py --json results/bench/envs.json
+	$(BIN)/python benchmarks/memory.py --json results/bench/memory.json
 
 # The docs site (MkDocs Material): HTML in build/docs, every warning an error (also run by the tests).
 docs: setup
