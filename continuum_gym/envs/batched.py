@@ -164,6 +164,7 @@ class BatchedCore:
     spec = None
     config_class: type = None
     step_kernel = None  #: the compiled ``*_step_batch`` of the core
+    _observe_mask: np.ndarray | None = None  # observe_rows' ``active`` (N,) uint8, zero between calls
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     builtin_reward_names: tuple = ()
     info_fields: tuple = ()
@@ -263,8 +264,8 @@ class BatchedCore:
         """
         from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 
-        mask = self.__dict__.get("_observe_mask")
-        if mask is None or mask.shape[0] != self.num_envs:
+        mask = self._observe_mask
+        if mask is None or mask.shape[0] != self.num_envs:  # made on the first reset, kept (and pickled)
             mask = self._observe_mask = np.zeros(self.num_envs, dtype=np.uint8)
             self._no_actions = np.zeros((1,) + self.single_action_space.shape)
         mask[rows] = OBSERVE_ONLY
