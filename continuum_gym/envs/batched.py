@@ -265,7 +265,7 @@ class BatchedCore:
         from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 
         mask = self._observe_mask
-        if mask is None or mask.shape[0] != self.num_envs:  # made on the first reset, kept (and pickled)
+        if mask is None:  # made on the first reset, kept (and pickled)
             mask = self._observe_mask = np.zeros(self.num_envs, dtype=np.uint8)
             self._no_actions = np.zeros((1,) + self.single_action_space.shape)
         mask[rows] = OBSERVE_ONLY
