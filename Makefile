@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup setup-test demo test test-fast bench reproduce docs clean
+.PHONY: setup setup-test precompile demo test test-fast bench reproduce docs clean
 
 # The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
@@ -14,6 +14,8 @@ $(STAMP): pyproject.toml
 	# The local CPU wheel first: a bare `torch` requirement would pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e .
+	# Compile the kernels now, once (about a minute), so that a first step takes a second, not ~40 s.
+	$(BIN)/continuum-gym precompile
 	touch $(STAMP)
 
 $(TEST_STAMP): $(STAMP)
@@ -23,6 +25,11 @@ $(TEST_STAMP): $(STAMP)
 setup: $(STAMP)
 
 setup-test: $(TEST_STAMP)
+
+# After editing the package's sources the precompiled set no longer matches them and is ignored
+# (kernels compile on first use, as numba does); this rebuilds it.
+precompile: setup
+	$(BIN)/continuum-gym precompile
 
 # The main job: analytic baselines and the shipped residual / pure-RL policies on held-out tasks,
 # the comparison table (printed, results/evaluate/results.md, .json) and figures; plus the robots' picture.
@@ -50,4 +57,4 @@ docs: setup
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 clean:
-	rm -rf $(VENV) results build
+	rm -rf $(VENV) results build continuum_gym/_precompiled

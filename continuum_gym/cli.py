@@ -19,6 +19,7 @@ SUBCOMMANDS = {
     "render": ("continuum_gym.render.record", "record an episode: external and endoscope views"),
     "sweep": ("continuum_gym.agents.sweep", "multi-seed training and sweeps on Ray Tune"),
     "dataset": ("continuum_gym.evaluation.datasets", "record the baselines' episodes as Minari datasets (offline RL)"),
+    "precompile": ("continuum_gym.precompile", "compile the kernels once per install: a first step in about a second"),
 }
 
 

@@ -11,10 +11,10 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.geometry.force_field import potential_gradient_framed
 from continuum_gym.geometry.lens_cone import centre_distance_kernel
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.linalg import twist_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
@@ -34,7 +34,7 @@ OcclusionScratch = namedtuple("OcclusionScratch", ["p", "R", "J", "work33", "e_w
                                                    "mask"])
 
 
-@njit(cache=True)
+@kernel
 def make_scratch(n_points, dof):
     """Work arrays of ``occlusion_rates_kernel`` for ``n_points`` psps and ``dof`` joints."""
     return OcclusionScratch(np.empty(3), np.empty((3, 3)), np.empty((6, dof)), np.empty((3, 3)), np.empty(3),
@@ -42,13 +42,13 @@ def make_scratch(n_points, dof):
                             np.empty((6, 6)), np.empty((6, 2)), np.empty(dof))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def wrap_angle(x):
     """Wrap an angle (rad) to (-pi, pi]."""
     return math.pi - (math.pi - x) % (2.0 * math.pi)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def tracking_twist(p, R, p_des, R_des, v_ff, k_track, v_max, w_max, work33, e_w, xi):
     """Desired twist xi (6,) of paper-notes §1.3 item 11: saturated proportional + linear feed-forward."""
     e0 = p_des[0] - p[0]
@@ -66,7 +66,7 @@ def tracking_twist(p, R, p_des, R_des, v_ff, k_track, v_max, w_max, work33, e_w,
         xi[3 + a] = gain * e_w[a]
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def add_limit_barrier(q, lower, upper, gain, margin, grad):
     """Quadratic barrier inside ``margin`` of each finite position limit, added to grad Pi.
 
@@ -90,7 +90,7 @@ def add_limit_barrier(q, lower, upper, gain, margin, grad):
             grad[i] -= gain * depth_lo * scale * scale
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scratch, qdot):
     """One control evaluation: q_dot (dof,) into ``qdot``; returns (gamma_dot, frozen_mask_bits, rate_scale).
 
@@ -104,7 +104,7 @@ def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scr
 
 # Not inlined, unlike its helpers: inlined into the step and observe kernels it would save ~10 % of an
 # occlusion step (its entry's reference counts) but add ~20 s to the first compile.
-@njit(cache=True)
+@kernel
 def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     """Eqs (22)-(24) for a desired twist ``xi`` (6,), with J and the tip in ``scratch`` and the frames in
     ``ws`` already (``tip_kernel`` at q leaves both).
@@ -172,7 +172,7 @@ def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     return gamma_dot, frozen_bits, rate_scale
 
 
-@njit(cache=True)
+@kernel
 def twist_rates_batch(Q, G, XI, dt, robot, prm, qdot, gamma_dot):
     """Rates for given desired twists XI (n, 6) (eq 22 without the tip law)."""
     ws = make_workspace(robot.lengths.shape[0])
@@ -182,7 +182,7 @@ def twist_rates_batch(Q, G, XI, dt, robot, prm, qdot, gamma_dot):
         gamma_dot[i], _, _ = resolve_rates(Q[i], G[i], XI[i], dt, robot, prm, ws, scratch, qdot[i])
 
 
-@njit(cache=True)
+@kernel
 def rates_batch(Q, G, P_des, R_des, V_ff, dt, robot, prm, qdot, gamma_dot, frozen, scale):
     """One control evaluation per row (tip law + eqs 22-24)."""
     ws = make_workspace(robot.lengths.shape[0])
@@ -192,7 +192,7 @@ def rates_batch(Q, G, P_des, R_des, V_ff, dt, robot, prm, qdot, gamma_dot, froze
             Q[i], G[i], P_des[i], R_des[i], V_ff[i], dt, robot, prm, ws, scratch, qdot[i])
 
 
-@njit(cache=True)
+@kernel
 def rollout_batch(Q0, G0, P_des, R_des, V_ff, dt, robot, prm, q_traj, gamma_traj):
     """Explicit Euler (paper-notes §1.3 item 6) over T steps with per-step targets (N, T, ...)."""
     dof = Q0.shape[1]

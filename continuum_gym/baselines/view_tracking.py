@@ -22,9 +22,9 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.baselines.base import Controller, as_rotation_field, broadcast_rows
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope import (
     ContinuumEndoscope,
     endoscope_kinematics,
@@ -56,13 +56,13 @@ ViewScratch = namedtuple("ViewScratch", ["p_cam", "R_ct", "p_ct", "J", "ws", "wo
                                          "r"])
 
 
-@njit(cache=True)
+@kernel
 def wrap_half_open(x):
     """Wrap an angle (rad) to [-pi, pi) (paper-notes §2.1: deltas are wrapped, not limited)."""
     return x - 2.0 * math.pi * math.floor((x + math.pi) / (2.0 * math.pi))
 
 
-@njit(cache=True)
+@kernel
 def make_view_scratch():
     """Work arrays of ``view_rates_kernel`` (``ViewScratch``)."""
     return ViewScratch(np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6)), make_endoscope_workspace(),
@@ -72,7 +72,7 @@ def make_view_scratch():
                        np.empty(3))
 
 
-@njit(cache=True)
+@kernel
 def view_errors(q, p_tgt, R_tgt, robot, scratch):
     """FK + Jacobian into scratch; returns (eps_p (m), eps_R (rad)); e_p in twist[:3], e_w in e_w."""
     p_ct, e_w, twist = scratch.p_ct, scratch.e_w, scratch.twist
@@ -88,7 +88,7 @@ def view_errors(q, p_tgt, R_tgt, robot, scratch):
 # Inlined, with their work arrays in ``ViewScratch``: the DR loop runs these up to 7 times per step, and a
 # call or an allocation there costs more than its 3 x 6 arithmetic (see the reference-count note in
 # robots/mbcr_kernels.py).
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def damped_pinv_rows(A, damping, out, work3, ones, X):
     """out (6 x 3) = A^T (A A^T + damping I)^-1 for A (3 x 6); undamped if damping == 0 and A A^T invertible.
 
@@ -104,7 +104,7 @@ def damped_pinv_rows(A, damping, out, work3, ones, X):
     return ok
 
 
-@njit(cache=True)
+@kernel
 def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     """Joint rates (SI) for one step into ``qdot``; returns (eps_p, eps_R, frozen_bits).
 
@@ -158,7 +158,7 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     return eps_p, eps_r, frozen_bits
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def dr_solution(Jmm, twist, mask, damping, scratch, qdot):
     """Eq (17) with the damped inverse of eq (19) on the active columns (mask); frozen rates are 0.
 
@@ -201,7 +201,7 @@ def dr_solution(Jmm, twist, mask, damping, scratch, qdot):
             qdot[k] = first[k] + pc[k, 0] * r[0] + pc[k, 1] * r[1] + pc[k, 2] * r[2]
 
 
-@njit(cache=True)
+@kernel
 def integrate_view_step(q, qdot, dt, lower, upper, out):
     """Euler step, clamped to the position limits (eq 13), deltas wrapped; returns clamped-joint bits."""
     clamped = 0
@@ -215,7 +215,7 @@ def integrate_view_step(q, qdot, dt, lower, upper, out):
     return clamped
 
 
-@njit(cache=True)
+@kernel
 def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, robot, prm, record, q_final, steps, status, q_hist):
     """Run each row to convergence, stall or max_steps (paper-notes §2.6). status: 0 max steps, 1 converged, 2 stalled."""
     scratch = make_view_scratch()
@@ -350,7 +350,7 @@ class ViewTrackingController(Controller):
         return self.joint_rates(obs["q"], target, dt=float(obs.get("dt", 0.01))), state
 
 
-@njit(cache=True)
+@kernel
 def _rates_batch(Q, P, R, dt, robot, prm, rates, errors, frozen):
     scratch = make_view_scratch()
     for i in range(Q.shape[0]):

@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
-from numba import njit
 
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import integer
 
 
-@njit(cache=True)
+@kernel
 def _clip_rows(array, clipped):
     """Clip (N, d) to [-1, 1] in place, marking clipped rows; False if anything is non-finite."""
     for i in range(array.shape[0]):

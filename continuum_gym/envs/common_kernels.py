@@ -6,9 +6,9 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.envs.trajectories import hermite_point
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.rotations import rotation_exp
 
 #: Task instances as arrays, for both environments (see ``envs.tasks.TaskBatch``): a trajectory of the
@@ -29,7 +29,7 @@ def task_arrays(batch, limit) -> TaskArrays:
                       batch.n_knots, batch.knot_t, batch.knot_x, batch.knot_m, batch.knot_r, batch.knot_rm)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def trajectory_point(centre, amp, omega, phase, t, p, v):
     """x(t) = c + sum a_k sin(w_k t + phi_k) and its derivative, into p and v."""
     for a in range(p.shape[0]):
@@ -43,7 +43,7 @@ def trajectory_point(centre, amp, omega, phase, t, p, v):
             v[a] += amp[k, a] * omega[k] * c
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def desired_point(tasks, i, t, p, v):
     """Row i's desired position (or da Vinci configuration) and its rate at time t (s), into p and v."""
     n = tasks.n_knots[i]
@@ -53,7 +53,7 @@ def desired_point(tasks, i, t, p, v):
         hermite_point(tasks.knot_t[i], tasks.knot_x[i], tasks.knot_m[i], n, t, p, v)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def desired_rotation(tasks, i, t, w, w_rate, turn, out):
     """Row i's desired orientation at time t: R_des for sine tasks, R_des exp([r(t)]) for splines.
 
@@ -71,7 +71,7 @@ def desired_rotation(tasks, i, t, w, w_rate, turn, out):
     return out
 
 
-@njit(cache=True)
+@kernel
 def rotation_at(tasks, row, t, out):
     """Row's desired orientation at time t into out (3, 3) (the kernels' own computation)."""
     w, w_rate, turn = np.empty(3), np.empty(3), np.empty((3, 3))
@@ -81,7 +81,7 @@ def rotation_at(tasks, row, t, out):
             out[a, b] = R[a, b]
 
 
-@njit(cache=True)
+@kernel
 def trajectory_batch(tasks, rows, times, p_out, v_out):
     """Desired positions/velocities (len(rows), T, dim) of task rows at times (T,) (s); same code as the kernels."""
     for k in range(rows.shape[0]):
@@ -89,7 +89,7 @@ def trajectory_batch(tasks, rows, times, p_out, v_out):
             desired_point(tasks, rows[k], times[j], p_out[k, j], v_out[k, j])
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def clip_observation(o, limit):
     """Clip every entry of an observation row to [-limit, limit] in place (documented in the env docstrings)."""
     for j in range(o.shape[0]):
@@ -99,7 +99,7 @@ def clip_observation(o, limit):
             o[j] = -limit
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def clamp(value, lower, upper):
     """(value clamped to [lower, upper], whether it was clamped)."""
     if value > upper:

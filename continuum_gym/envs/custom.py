@@ -12,10 +12,11 @@ from collections import namedtuple
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit, typeof, types
+from numba import typeof, types
 from numba.core.registry import CPUDispatcher
 from numba.typed import List
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import describe
 
 #: A controller slot: ``rates`` a typed list holding the function (or empty), its ``params`` and ``active``.
@@ -132,7 +133,7 @@ def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
     return RewardSlot(fns, params, np.array(list(weights), dtype=np.float64))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def add_reward_terms(i, slot, metrics, flags, actions, terms, first):
     """terms[i, first + k] = w_k fn_k(metrics[i], flags[i], actions[i], params_k); returns their sum."""
     total = 0.0
@@ -143,7 +144,7 @@ def add_reward_terms(i, slot, metrics, flags, actions, terms, first):
     return total
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def row_reward(i, terms, n_builtin, slot, metrics, flags, actions):
     """Row ``i``'s reward: the sum of its ``n_builtin`` built-in terms, plus the registered compiled terms
     of ``slot`` (written after them into ``terms``; ``slot`` None: none registered, the branch is pruned)."""

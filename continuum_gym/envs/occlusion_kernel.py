@@ -19,7 +19,6 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.baselines.occlusion_kernels import (
     make_scratch,
@@ -36,6 +35,7 @@ from continuum_gym.envs.common_kernels import (
 from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.linalg import twist_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
@@ -91,7 +91,7 @@ def observation_dim(n_segments: int) -> int:
     return 5 * n_segments + 17
 
 
-@njit(cache=True)
+@kernel
 def make_step_work(n_segments, n_points, n_insert):
     """Per-thread scratch of ``occlusion_step_row`` and ``occlusion_observe``."""
     dof = 2 * n_segments + 1
@@ -102,7 +102,7 @@ def make_step_work(n_segments, n_points, n_insert):
                              np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(dof + 1))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def project_nullspace(J, r, work, out):
     """out = (I - J^T (J J^T + eps I)^-1 J) r for the 6 x dof tip Jacobian J."""
     A, B = work.A, work.B
@@ -121,14 +121,14 @@ def project_nullspace(J, r, work, out):
         out[k] = r[k] - acc
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def view_fraction_at(p, gamma, cone):
     """Angle of point p (m, {w}) from the lens axis at endoscope rotation gamma, in half-angles."""
     xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, cone.d_o, cone.alpha, cone.model)
     return math.atan2(math.sqrt(xl * xl + yl * yl), zl) / cone.beta
 
 
-@njit(cache=True)
+@kernel
 def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
     """Endoscope rate with the residual's share scaled back so the tip p stays within ``bound`` half-angles.
 
@@ -148,7 +148,7 @@ def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
     return base_rate + low * residual_rate, True
 
 
-@njit(cache=True)
+@kernel
 def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     """Geometry at the state of row i: next baseline command (cached), observation and metrics.
 
@@ -235,7 +235,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     clip_observation(o, OBS_LIMIT)
 
 
-@njit(cache=True)
+@kernel
 def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
@@ -353,7 +353,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     out.rewards[i] = row_reward(i, terms, N_TERMS_REWARD, terms_slot, metrics, flags, actions)
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
     ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).

@@ -16,8 +16,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_finite, describe
 
 #: A recording may last at most this long (s) and have at most this many samples.
@@ -161,7 +161,7 @@ class DaVinciTrajectory:
 
 
 # ---------------------------------------------------------------------- kernels
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def hermite_point(t_knots, x_knots, m_knots, n, t, p, v):
     """Cubic-Hermite value and derivative at time t (s) of the first ``n`` knots into p and v."""
     dim = p.shape[0]

@@ -17,7 +17,6 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.baselines.view_tracking import (
     integrate_view_step,
@@ -28,6 +27,7 @@ from continuum_gym.baselines.view_tracking import (
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.custom import row_reward
 from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio_in
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
 
@@ -65,7 +65,7 @@ ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "d
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
 
-@njit(cache=True)
+@kernel
 def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
     """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
 
@@ -126,14 +126,14 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
     clip_observation(o, OBS_LIMIT)
 
 
-@njit(cache=True)
+@kernel
 def make_view_step_work():
     return ViewStepWork(make_view_scratch(), np.empty(6), np.empty(6), np.empty(4), np.empty(4), np.empty(3),
                         np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(6),
                         make_overlap_work())
 
 
-@njit(cache=True)
+@kernel
 def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, work, cmd):
     """The baseline's joint rates towards the da Vinci target moved by the action (target-space residual).
 
@@ -161,7 +161,7 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
 # references to every array of the bundles it passes, and no library of its own to optimise and load.
 # Native N=64 182 k -> 198 k steps/s (one thread, paired), single step 10.1 -> 9.65 us, first compile
 # -1.8 s. The same for the occlusion row measured even (its substeps dominate), so it is left as it was.
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work):
     """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for row i."""
     cmd, q_new = work.cmd, work.q_new
@@ -209,7 +209,7 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
     out.rewards[i] = row_reward(i, terms, N_REWARD_TERMS, terms_slot, metrics, flags, actions)
 
 
-@njit(cache=True, nogil=True)
+@kernel(nogil=True)
 def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
     marked ``OBSERVE_ONLY`` (releases the GIL; see occlusion_kernel)."""

@@ -13,7 +13,6 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.geometry.lens_cone import (
     cone_distance_slant_cs,
@@ -22,6 +21,7 @@ from continuum_gym.geometry.lens_cone import (
     resolve_cone,
     to_lens_cs,
 )
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.mbcr import PAPER_PSPS, MultiBackboneRobot
 from continuum_gym.robots.mbcr_kernels import all_finite, fill_frames, make_workspace, points_kernel_framed
 from continuum_gym.validation import as_finite, positive
@@ -77,7 +77,7 @@ def resolve_field(field) -> ForceField:
     return field
 
 
-@njit(cache=True)
+@kernel
 def force_kernel(px, py, pz, gamma, cone, field):
     """World force (N) on one point (m): eq (18)-(19) with paper-notes §1.3 item 8. Returns (fx, fy, fz).
 
@@ -87,7 +87,7 @@ def force_kernel(px, py, pz, gamma, cone, field):
                            math.cos(cone.beta), math.sin(cone.beta), cone, field)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def force_kernel_cs(px, py, pz, cg, sg, ca, sa, cb, sb, cone, field):
     """``force_kernel`` with cos/sin of gamma, alpha and beta precomputed: the same for every point of a robot."""
     xl, yl, zl = to_lens_cs(px, py, pz, cg, sg, ca, sa, cone.d_o, cone.model)
@@ -99,14 +99,14 @@ def force_kernel_cs(px, py, pz, cg, sg, ca, sa, cb, sb, cone, field):
     return magnitude * fx, magnitude * fy, magnitude * fz
 
 
-@njit(cache=True)
+@kernel
 def potential_gradient_kernel(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
     """grad Pi (eq 12) for one q into ``grad`` (dof,); P, JV are (m, 3), (m, 3, dof) scratch."""
     fill_frames(q, robot, ws)
     potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, cone, field, grad):
     """``potential_gradient_kernel`` with the ``frames`` of q already in ws (``tip_kernel`` leaves it)."""
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
@@ -126,7 +126,7 @@ def potential_gradient_framed(q, robot, ws, segments, fractions, P, JV, gamma, c
             grad[k] -= JV[i, 0, k] * fx + JV[i, 1, k] * fy + JV[i, 2, k] * fz
 
 
-@njit(cache=True)
+@kernel
 def _potential_gradient_batch(qs, G, robot, segments, fractions, cone, field, out):
     if not all_finite(qs):
         return False
@@ -139,7 +139,7 @@ def _potential_gradient_batch(qs, G, robot, segments, fractions, cone, field, ou
     return True
 
 
-@njit(cache=True)
+@kernel
 def _force_batch(P, G, cone, field, out):
     for i in range(P.shape[0]):
         out[i, 0], out[i, 1], out[i, 2] = force_kernel(P[i, 0], P[i, 1], P[i, 2], G[i], cone, field)

@@ -18,8 +18,8 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import (
     angle_in_open_interval,
     as_finite,
@@ -84,7 +84,7 @@ def resolve_cone(cone) -> LensCone:
 
 
 # ---------------------------------------------------------------------- compiled kernels
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def to_lens_cs(px, py, pz, cg, sg, ca, sa, d_o, model):
     """``to_lens`` with cos/sin of gamma and alpha precomputed (for loops over many points)."""
     if model == 1:
@@ -100,20 +100,20 @@ def to_lens_cs(px, py, pz, cg, sg, ca, sa, d_o, model):
     return xl, yl, zl
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def to_lens(px, py, pz, gamma, d_o, alpha, model):
     """Point (m) from {w} to {lens}: eq (15), both lens models. Returns (x_l, y_l, z_l)."""
     return to_lens_cs(px, py, pz, math.cos(gamma), math.sin(gamma), math.cos(alpha), math.sin(alpha), d_o, model)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def lens_to_world_direction(vx, vy, vz, gamma, alpha):
     """Direction from {lens} to {w}: (^{lens}R_w)^T v = Rz(gamma) Ry(-alpha) v."""
     return lens_to_world_direction_cs(vx, vy, vz, math.cos(gamma), math.sin(gamma), math.cos(alpha),
                                       math.sin(alpha))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def lens_to_world_direction_cs(vx, vy, vz, cg, sg, ca, sa):
     """``lens_to_world_direction`` with cos/sin of gamma and alpha precomputed."""
     ux = ca * vx - sa * vz
@@ -121,20 +121,20 @@ def lens_to_world_direction_cs(vx, vy, vz, cg, sg, ca, sa):
     return cg * ux - sg * vy, sg * ux + cg * vy, uz
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def cone_distance_slant(xl, yl, zl, beta):
     """(d, r, rho) of a point in {lens}: eqs (16)-(17); rho = sqrt(x_l^2 + y_l^2)."""
     return cone_distance_slant_cs(xl, yl, zl, math.cos(beta), math.sin(beta))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def cone_distance_slant_cs(xl, yl, zl, cb, sb):
     """``cone_distance_slant`` with cos/sin of the half-angle beta precomputed (loops over many points)."""
     rho = math.sqrt(xl * xl + yl * yl)
     return cb * rho - sb * zl, sb * rho + cb * zl, rho
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def centre_distance_kernel(p, gamma, d_o, alpha, model):
     """(d_c, dd_c/dgamma) of the tip p (m): paper-notes §1.3 item 10 (d_c = rho_ee).
 
@@ -151,13 +151,13 @@ def centre_distance_kernel(p, gamma, d_o, alpha, model):
     return rho, -(xl * dx + yl * dy) / rho
 
 
-@njit(cache=True)
+@kernel
 def _centre_distance_batch(P, G, d_o, alpha, model, dc, grad):
     for i in range(P.shape[0]):
         dc[i], grad[i] = centre_distance_kernel(P[i], G[i], d_o, alpha, model)
 
 
-@njit(cache=True)
+@kernel
 def _cone_coordinates_batch(P, G, d_o, alpha, beta, model, out):
     for i in range(P.shape[0]):
         xl, yl, zl = to_lens(P[i, 0], P[i, 1], P[i, 2], G[i], d_o, alpha, model)

@@ -16,13 +16,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.geometry.lens_cone import (
     cone_distance_slant_cs,
     resolve_cone,
     to_lens_cs,
 )
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.mbcr import MultiBackboneRobot, backbone_sample_count
 from continuum_gym.robots.mbcr_kernels import (
     all_finite,
@@ -34,7 +34,7 @@ from continuum_gym.validation import as_finite, integer
 VOI_SAMPLES_PER_SEGMENT = 40
 
 
-@njit(cache=True)
+@kernel
 def voi_kernel(points, gamma, cone, lens, dr):
     """(voi, nu, r_e, r_max) of one sampled backbone ``points`` (m, 3); ``lens`` (m, 3), ``dr`` (m, 2) scratch.
 
@@ -97,14 +97,14 @@ def voi_kernel(points, gamma, cone, lens, dr):
     return voi, nu, r_e, r_max
 
 
-@njit(cache=True)
+@kernel
 def voi_of_configuration(q, robot, ws, gamma, cone, n_per_segment, points, lens, dr):
     """VOI tuple of one configuration; ``points``, ``lens`` (m, 3) and ``dr`` (m, 2) are scratch."""
     backbone_kernel(q, robot, ws, n_per_segment, points)
     return voi_kernel(points, gamma, cone, lens, dr)
 
 
-@njit(cache=True)
+@kernel
 def _voi_batch(qs, G, robot, cone, n_per_segment, out):
     if not all_finite(qs):
         return False
@@ -123,7 +123,7 @@ def _voi_batch(qs, G, robot, cone, n_per_segment, out):
     return True
 
 
-@njit(cache=True)
+@kernel
 def _voi_single(q, gamma, robot, cone, n_per_segment):
     if not all_finite(q) or not math.isfinite(gamma):
         return False, 0.0, 0.0, 0.0, 0.0

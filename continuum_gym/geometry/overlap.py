@@ -19,7 +19,6 @@ from __future__ import annotations
 import threading
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.geometry.overlap_clipping import (  # noqa: F401  (used below; also imported from here, as before the split)
@@ -32,6 +31,7 @@ from continuum_gym.geometry.overlap_clipping import (  # noqa: F401  (used below
     overlap_ratio_in,
     overlap_ratio_nb,
 )
+from continuum_gym.robots.compiled import kernel
 
 __all__ = [
     "overlap_ratio",
@@ -60,7 +60,7 @@ _ERRORS = {
 # ----------------------------------------------------------------------------------------------
 # compiled input checks and the Python API's entry points
 # ----------------------------------------------------------------------------------------------
-@njit(cache=True)
+@kernel
 def _check_pose(p, R):
     """0 if p and R are finite and R is a proper rotation; 1 bad p; 2 non-finite R; 3 not a rotation."""
     for i in range(3):
@@ -114,7 +114,7 @@ _single_kernel = None
 _batch_kernel = None
 
 
-@njit(cache=True)
+@kernel
 def _overlap_single(p_a, R_a, p_b, R_b, tan_half, near, far):
     """OR of one pair, or −(error code) if an input is invalid."""
     code = _check_pose(p_a, R_a)
@@ -126,7 +126,7 @@ def _overlap_single(p_a, R_a, p_b, R_b, tan_half, near, far):
     return overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far)
 
 
-@njit(cache=True)
+@kernel
 def _overlap_batch(p_a, R_a, p_b, R_b, tan_half, near, far, out):
     """OR of N pairs (p: (N, 3), R: (N, 3, 3)) into out (N,); returns (error code, index) or (0, -1)."""
     n = out.shape[0]

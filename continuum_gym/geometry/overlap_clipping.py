@@ -25,9 +25,9 @@ from __future__ import annotations
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.geometry.frustum import FACE_VERTICES
+from continuum_gym.robots.compiled import kernel
 
 __all__ = ["OverlapWork", "make_overlap_work", "local_geometry", "overlap_pair", "overlap_ratio_nb", "overlap_ratio_in",
            "COPLANAR_NORMAL_TOL", "COPLANAR_OFFSET_TOL"]
@@ -45,7 +45,7 @@ _FACES = FACE_VERTICES  # numba freezes this global as a constant
 _POLY_CAPACITY = 256  # a 4-gon clipped 6 times has at most 4 * 2**6 vertices (<= 10 if exactly convex)
 
 
-@njit(cache=True)
+@kernel
 def local_geometry(t, near, far, verts, planes):
     """Fill the camera-frame vertices (8, 3) and half-spaces (6, 4) (order as in ``frustum.py``)."""
     a = t * near
@@ -74,7 +74,7 @@ def local_geometry(t, near, far, verts, planes):
         planes[k, 2] = -s
 
 
-@njit(cache=True)
+@kernel
 def make_overlap_work():
     """An ``OverlapWork`` for :func:`overlap_ratio_in` (allocate once, reuse over a batch)."""
     return OverlapWork(
@@ -88,7 +88,7 @@ def make_overlap_work():
     )
 
 
-@njit(cache=True)
+@kernel
 def overlap_pair(pa, Ra, pb, Rb, t, near, far, lv, lh, vb, hb, cut, poly, dist):
     """OR for one pair; lv, lh: camera-frame vertices/half-spaces of the frustum; the rest is workspace."""
     # pose of camera b in camera frame a: p = Ra^T (pb - pa), Rr = Ra^T Rb
@@ -268,7 +268,7 @@ def overlap_pair(pa, Ra, pb, Rb, t, near, far, lv, lh, vb, hb, cut, poly, dist):
     return ratio
 
 
-@njit(cache=True)
+@kernel
 def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
     """Compiled OR of one pair (p: (3,), R: (3, 3)) for a square frustum; no input checks.
 
@@ -281,7 +281,7 @@ def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
     return overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
 
 
-@njit(cache=True)
+@kernel
 def overlap_ratio_in(p_a, R_a, p_b, R_b, tan_half, near, far, work):
     """:func:`overlap_ratio_nb` with its work arrays passed (an ``OverlapWork``): same arithmetic, no allocation.
 

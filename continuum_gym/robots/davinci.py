@@ -21,9 +21,9 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import (
     angle_in_open_interval,
     as_configuration,
@@ -42,7 +42,7 @@ DOF = 4
 DaVinciKernelArgs = namedtuple("DaVinciKernelArgs", ["alpha", "Le", "lower", "upper"])
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def stem_rotation(yaw, pitch, roll, R):
     """``w_R_dV3 = Ry(yaw) Rx(pitch) Rz(roll)`` into R (eqs 1, 2: w_R_dV1 dV1_R_dV2 dV2_R_dV3)."""
     cy, sy = math.cos(yaw), math.sin(yaw)
@@ -63,7 +63,7 @@ def stem_rotation(yaw, pitch, roll, R):
     R[2, 2] = cy * cp
 
 
-@njit(cache=True)
+@kernel
 def davinci_pose(q_dv, dv, clip, p_cam, R_cam, p_tgt):
     """Camera (= visual target) frame and target point of one da Vinci configuration (paper-notes §2.2).
 
@@ -91,13 +91,13 @@ def davinci_pose(q_dv, dv, clip, p_cam, R_cam, p_tgt):
         p_tgt[a] = p_cam[a] + dv.Le * R_cam[a, 2]
 
 
-@njit(cache=True)
+@kernel
 def _stem_batch(Q, out):
     for i in range(Q.shape[0]):
         stem_rotation(Q[i, 1], Q[i, 2], Q[i, 3], out[i])
 
 
-@njit(cache=True)
+@kernel
 def _pose_batch(Q, dv, clip, p_cam, R_cam, p_tgt):
     for i in range(Q.shape[0]):
         davinci_pose(Q[i], dv, clip, p_cam[i], R_cam[i], p_tgt[i])

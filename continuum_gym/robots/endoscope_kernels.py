@@ -12,8 +12,8 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.segment import (
     bend_rotation,
     bend_terms,
@@ -26,13 +26,13 @@ EndoscopeKernelArgs = namedtuple("EndoscopeKernelArgs", ["L1", "Lm", "L2", "Lc",
 EndoscopeWorkspace = namedtuple("EndoscopeWorkspace", ["R1", "W1", "R2"])
 
 
-@njit(cache=True)
+@kernel
 def make_endoscope_workspace():
     """Scratch arrays of ``endoscope_kinematics``."""
     return EndoscopeWorkspace(np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)))
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def endoscope_kinematics(q, robot, ws, p_cam, w_R_cam, p_ct, J, with_jacobian):
     """Eqs (3), (4), (7), (8) and, if ``with_jacobian``, eq (9) for one configuration.
 
@@ -183,14 +183,14 @@ def endoscope_kinematics(q, robot, ws, p_cam, w_R_cam, p_ct, J, with_jacobian):
     J[2, 5] += Wdx * ry - Wdy * rx
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def require_finite(q):
     for j in range(q.shape[0]):
         if not math.isfinite(q[j]):
             raise ValueError("q must be finite (no NaN or inf)")
 
 
-@njit(cache=True)
+@kernel
 def kinematics_batch(Q, robot, p_cam, w_R_cam, p_ct, J, with_jacobian):
     """Rows of Q (n, 6) into p_cam (n, 3), w_R_cam (n, 3, 3), p_ct (n, 3) and, if ``with_jacobian``,
     J (n, 6, 6) (else J is (1, 6, 6) and unused)."""
@@ -202,7 +202,7 @@ def kinematics_batch(Q, robot, p_cam, w_R_cam, p_ct, J, with_jacobian):
                              with_jacobian)
 
 
-@njit(cache=True)
+@kernel
 def kinematics_single(q, L1, Lm, L2, Lc, Le, p_cam, w_R_cam, p_ct, J, with_jacobian):
     # Plain floats, not the bundle: unboxing a namedtuple argument costs ~0.7 us per call.
     require_finite(q)
@@ -214,7 +214,7 @@ def kinematics_single(q, L1, Lm, L2, Lc, Le, p_cam, w_R_cam, p_ct, J, with_jacob
 UNUSED_JACOBIAN = np.empty((1, 6, 6))
 
 
-@njit(cache=True)
+@kernel
 def backbone_batch(Q, robot, m):
     """Centre line samples (n, 2m + 4, 3) in m: origin, {1b}, m points of segment 1, {2b}, m points of
     segment 2, camera."""

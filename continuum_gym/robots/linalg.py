@@ -11,18 +11,19 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from continuum_gym.robots.compiled import kernel
+
 
 __all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve", "twist_gram_solve", "gram_solve_3x6"]
 
 
-@njit(cache=True)
+@kernel
 def gram_matrix(J, mask, damping, out):
     """out (r x r) = J diag(mask) J^T + damping I for J (r x n) and mask (n,) (1.0 keeps a column)."""
     gram_matrix_sized(J, mask, damping, out, out.shape[0], J.shape[1])
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def gram_matrix_sized(J, mask, damping, out, r, n):
     """``gram_matrix`` with the sizes passed: a caller that passes a constant r (the 6 rows of a twist)
     lets the compiler unroll those loops after inlining (same operations, same order)."""
@@ -36,7 +37,7 @@ def gram_matrix_sized(J, mask, damping, out, r, n):
         out[a, a] += damping
 
 
-@njit(cache=True)
+@kernel
 def cholesky_solve_inplace(A, B):
     """Solve A X = B for symmetric positive-definite A (n x n) and B (n x m); B becomes X, A its factor.
 
@@ -46,7 +47,7 @@ def cholesky_solve_inplace(A, B):
     return cholesky_solve_sized(A, B, A.shape[0], B.shape[1])
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def cholesky_solve_sized(A, B, n, m):
     """``cholesky_solve_inplace`` with the sizes passed (constants from the caller unroll the loops)."""
     for j in range(n):
@@ -76,7 +77,7 @@ def cholesky_solve_sized(A, B, n, m):
     return True
 
 
-@njit(cache=True)
+@kernel
 def damped_gram_solve(J, mask, damping, A, B):
     """Solve (J diag(mask) J^T + damping I) X = B in place: B becomes X, A the Cholesky factor.
 
@@ -86,14 +87,14 @@ def damped_gram_solve(J, mask, damping, A, B):
     return cholesky_solve_inplace(A, B)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def twist_gram_solve(J, mask, damping, A, B):
     """``damped_gram_solve`` for a 6-row (twist) Jacobian and a 6 x 2 right-hand side: sizes fixed at compile time."""
     gram_matrix_sized(J, mask, damping, A, 6, J.shape[1])
     return cholesky_solve_sized(A, B, 6, 2)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def gram_solve_3x6(J, mask, damping, A, B):
     """``damped_gram_solve`` for a 3 x 6 Jacobian and a 3 x 6 right-hand side (dimension-reduced IK's damped
     inverses): sizes fixed at compile time."""

@@ -12,8 +12,8 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.segment import (
     bend_rotation,
     bend_terms,
@@ -34,7 +34,7 @@ MBCRWorkspace = namedtuple("MBCRWorkspace", ["R_base", "g_base", "p_local", "Q",
                                              "cs", "V", "W"])
 
 
-@njit(cache=True)
+@kernel
 def make_workspace(n_segments):
     """Scratch arrays for one robot of ``n_segments``; allocated once per batch call."""
     dof = 2 * n_segments + 1
@@ -44,7 +44,7 @@ def make_workspace(n_segments):
                          np.empty((n_segments + 1, 3, 2)))
 
 
-@njit(cache=True)
+@kernel
 def all_finite(x):
     for v in x.ravel():
         if not math.isfinite(v):
@@ -52,7 +52,7 @@ def all_finite(x):
     return True
 
 
-@njit(cache=True)
+@kernel
 def frames(q, robot, ws):
     """Fill ws.R_base[j] = ^wR_j and ws.g_base[j] = ^wg_j for j = 0..n (eqs 5, 7 corrected), ws.cs, and every
     whole segment's world twist columns in ws.V, ws.W.
@@ -68,7 +68,7 @@ def frames(q, robot, ws):
 # incref / decref of every array it was passed, bundles included, because the call may raise; those
 # were a quarter of an occlusion step. So the kernels called per substep are leaves, their helpers
 # inlined ("always"), and they pass the workspace's arrays and row indices rather than row views.
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def fill_frames(q, robot, ws):
     """``frames`` inlined into the caller, which stays a leaf."""
     lengths = robot.lengths
@@ -108,7 +108,7 @@ def fill_frames(q, robot, ws):
                 R_base[j + 1, a, b] = acc2
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def rotate_columns(R_base, j, jv, jw, V, W, row):
     """V[row] = R_j jv, W[row] = R_j jw for one segment's (3, 2) twist columns, the theta column negated
     first (q holds theta = pi/2 - bend: its column is minus the bend column)."""
@@ -137,7 +137,7 @@ def rotate_columns(R_base, j, jv, jw, V, W, row):
         W[row, 2, c] = w2
 
 
-@njit(cache=True)
+@kernel
 def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
     """Columns of the twist of a body point (segment, sigma) at world position ``point``.
 
@@ -150,7 +150,7 @@ def point_columns(q, robot, ws, segment, sigma, point, Jv, Jw, with_angular):
                          sigma, point[0], point[1], point[2], s, omc, a, da, db, Jv, Jw, with_angular)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def point_columns_framed(lengths, R_base, g_base, cs, jv, jw, V, W, dof, segment, sigma, px, py, pz, s, omc, a, da,
                          db, Jv, Jw, with_angular):
     """``point_columns`` on the workspace's arrays, given the bend terms at sigma * bend of the point's own
@@ -173,7 +173,7 @@ def point_columns_framed(lengths, R_base, g_base, cs, jv, jw, V, W, dof, segment
     add_columns(V, W, row, 0.0, 0.0, 0.0, 2 * segment, Jv, Jw, with_angular)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def add_columns(V, W, row, arm0, arm1, arm2, col0, Jv, Jw, with_angular):
     """Columns col0, col0 + 1 of a point's twist from a segment's world columns and the lever arm (m)."""
     for c in range(2):
@@ -190,14 +190,14 @@ def add_columns(V, W, row, arm0, arm1, arm2, col0, Jv, Jw, with_angular):
             Jw[2, col] = w2
 
 
-@njit(cache=True)
+@kernel
 def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
     delta = q[2 * segment + 1]
     body_point_cs(q, robot, ws, segment, sigma, math.cos(delta), math.sin(delta), out)
 
 
-@njit(cache=True)
+@kernel
 def body_point_cs(q, robot, ws, segment, sigma, cd, sd, out):
     """``body_point`` given cos and sin of the segment's delta (shared by all its samples)."""
     _, _, a, b, _, _ = bend_terms(sigma * (HALF_PI - q[2 * segment]))
@@ -205,7 +205,7 @@ def body_point_cs(q, robot, ws, segment, sigma, cd, sd, out):
                                             a, b)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def point_in_world(R_base, g_base, segment, length, cd, sd, a, b):
     """World position (m) of the point of ``segment`` at arc length ``length`` (m) from its base, given
     cos / sin of delta and the shape factors a, b at its bend (eq 8 of paper 000, then the base frame)."""
@@ -218,7 +218,7 @@ def point_in_world(R_base, g_base, segment, length, cd, sd, a, b):
     return x, y, z
 
 
-@njit(cache=True)
+@kernel
 def tip_kernel(q, robot, ws, p, R, J):
     """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q.
 
@@ -241,7 +241,7 @@ def tip_kernel(q, robot, ws, p, R, J):
             J[3 + a, col] = Jw[a, col]
 
 
-@njit(cache=True)
+@kernel
 def tip_batch(qs, robot, p, R, J):
     if not all_finite(qs):
         return False
@@ -251,7 +251,7 @@ def tip_batch(qs, robot, p, R, J):
     return True
 
 
-@njit(cache=True)
+@kernel
 def tip_single(q, lengths, stiffness, n_insert, p, R, J):
     # Plain arrays, not the bundle: unboxing a namedtuple argument costs ~0.7 us per call.
     if not all_finite(q):
@@ -260,14 +260,14 @@ def tip_single(q, lengths, stiffness, n_insert, p, R, J):
     return True
 
 
-@njit(cache=True)
+@kernel
 def points_kernel(q, robot, ws, segments, fractions, P, JV):
     """Positions (m, 3) and translational Jacobians (m, 3, dof) of body points, for one q."""
     fill_frames(q, robot, ws)
     points_kernel_framed(q, robot, ws, segments, fractions, P, JV)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def points_kernel_framed(q, robot, ws, segments, fractions, P, JV):
     """``points_kernel`` with the ``frames`` of q already in ws (as ``tip_kernel`` leaves it)."""
     lengths = robot.lengths
@@ -287,7 +287,7 @@ def points_kernel_framed(q, robot, ws, segments, fractions, P, JV):
                              da, db, JV[i], dummy, False)
 
 
-@njit(cache=True)
+@kernel
 def positions_batch(qs, robot, segments, fractions, P):
     """Positions only (N, m, 3) of body points: ``points_kernel_framed``'s arithmetic without the Jacobians.
 
@@ -311,7 +311,7 @@ def positions_batch(qs, robot, segments, fractions, P):
     return True
 
 
-@njit(cache=True)
+@kernel
 def points_batch(qs, robot, segments, fractions, P, JV):
     if not all_finite(qs):
         return False
@@ -321,7 +321,7 @@ def points_batch(qs, robot, segments, fractions, P, JV):
     return True
 
 
-@njit(cache=True)
+@kernel
 def backbone_kernel(q, robot, ws, n_per_segment, out):
     """Backbone samples from the channel exit (paper-notes §1.3 item 13).
 
@@ -352,7 +352,7 @@ def backbone_kernel(q, robot, ws, n_per_segment, out):
             idx += 1
 
 
-@njit(cache=True)
+@kernel
 def backbone_batch(qs, robot, n_per_segment, out):
     if not all_finite(qs):
         return False

@@ -5,15 +5,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_rotations, describe
 
 #: Tolerance of the orthogonality check of ``rotation_vector``'s input.
 ROTATION_TOL = 1e-6
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def rotation_log(R, out):
     """Rotation vector (axis * angle, rad) of a 3x3 rotation R into ``out``; robust at 0 and pi.
 
@@ -62,7 +62,7 @@ def rotation_log(R, out):
     out[2] = z * scale
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def rotation_exp(w, out):
     """Rotation matrix of the rotation vector w (axis * angle, rad) into ``out`` (Rodrigues)."""
     angle = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
@@ -82,7 +82,7 @@ def rotation_exp(w, out):
     out[2, 1] = b * y * z + a * x
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def orientation_error(R_des, R, work, out):
     """log(R_des R^T) (rad), the world-frame rotation that takes R to R_des (paper-notes §1.3 item 11)."""
     for a in range(3):
@@ -94,7 +94,7 @@ def orientation_error(R_des, R, work, out):
     rotation_log(work, out)
 
 
-@njit(cache=True)
+@kernel
 def _log_batch(flat, out):
     for i in range(flat.shape[0]):
         rotation_log(flat[i], out[i])

@@ -14,15 +14,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_finite, positive
 
 # Below this |bend| the closed forms lose digits to cancellation; the series error at the switch is < 1e-11.
 SERIES_SWITCH = 2e-3
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def bend_terms(bend):
     """Return ``s, omc, a, b, da, db`` of a bend angle (rad; 0 is straight).
 
@@ -49,7 +49,7 @@ def bend_terms(bend):
     return s, omc, a, b, da, db
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def bend_rotation(s, omc, cd, sd, R):
     """Write ``Rz(-delta) Ry(bend) Rz(delta)`` (eq 6 of paper 000, eq 4 corrected of paper 001) into R."""
     R[0, 0] = 1.0 - omc * cd * cd
@@ -63,13 +63,13 @@ def bend_rotation(s, omc, cd, sd, R):
     R[2, 2] = 1.0 - omc
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def segment_position(bend, delta, length, out):
     """End-disk position in the segment base frame (m): eq (8) of paper 000 / eq (3) of paper 001."""
     segment_position_cs(bend, math.cos(delta), math.sin(delta), length, out)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def segment_position_cs(bend, cd, sd, length, out):
     """``segment_position`` given cos and sin of delta: the backbone samples of one segment share them."""
     _, _, a, b, _, _ = bend_terms(bend)
@@ -78,14 +78,14 @@ def segment_position_cs(bend, cd, sd, length, out):
     out[2] = length * b
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def segment_rotation(bend, delta, out):
     """End-disk rotation ``Rz(-delta) Ry(bend) Rz(delta)`` in the segment base frame."""
     s, omc, _, _, _, _ = bend_terms(bend)
     bend_rotation(s, omc, math.cos(delta), math.sin(delta), out)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def segment_jacobian(bend, delta, length, sigma, jv, jw):
     """Twist of the point at arc fraction ``sigma`` per (d bend_end, d delta), in the segment base frame.
 
@@ -98,7 +98,7 @@ def segment_jacobian(bend, delta, length, sigma, jv, jw):
     segment_jacobian_terms(s, omc, a, da, db, math.cos(delta), math.sin(delta), length, sigma, jv, jw)
 
 
-@njit(cache=True, inline="always")
+@kernel(inline="always")
 def segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, sigma, jv, jw):
     """``segment_jacobian`` from the bend terms at sigma * bend and cos / sin of delta (computed once by
     a caller that also needs them for the pose)."""
@@ -118,7 +118,7 @@ def segment_jacobian_terms(s, omc, a, da, db, cd, sd, length, sigma, jv, jw):
     jw[2, 1] = -omc
 
 
-@njit(cache=True)
+@kernel
 def _pose_batch(bend, delta, length, p, R):
     for i in range(bend.shape[0]):
         segment_position(bend[i], delta[i], length, p[i])
@@ -151,7 +151,7 @@ def segment_tip_pose(phi, delta, length: float) -> tuple[np.ndarray, np.ndarray]
     return p.reshape(phi.shape + (3,)), R.reshape(phi.shape + (3, 3))
 
 
-@njit(cache=True)
+@kernel
 def _segment_batch(theta, delta, length, with_jacobian, out):
     """Pose (n, 12: p then R row-major) or Jacobian (n, 12: rows [J_tv; J_tw], columns theta, delta)."""
     R = np.empty((3, 3))

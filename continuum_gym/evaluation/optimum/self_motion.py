@@ -7,11 +7,11 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from continuum_gym.baselines import OcclusionLimits
 from continuum_gym.evaluation.optimum.workers import positive_int
 from continuum_gym.robots import MultiBackboneRobot
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.linalg import damped_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
@@ -28,7 +28,7 @@ NEWTON_MAX_ITERATIONS = 12
 
 
 # ====================================================================== self-motion (paper 000)
-@njit(cache=True)
+@kernel
 def _newton_project(q, p0, R0, robot, scale, tolerance, max_iterations):
     """Newton on the 6-D tip pose error with the pseudo-inverse (scaled joints), in place.
 
@@ -84,7 +84,7 @@ def _newton_project(q, p0, R0, robot, scale, tolerance, max_iterations):
     return -1, err, moved
 
 
-@njit(cache=True)
+@kernel
 def _null_direction(q, robot, scale, previous):
     """Unit null vector of the scaled 6x7 tip Jacobian, sign-continuous with ``previous`` (scaled space).
 

@@ -7,7 +7,6 @@ import math
 import time
 
 import numpy as np
-from numba import njit
 from scipy.optimize import differential_evolution, least_squares, minimize
 
 from continuum_gym.baselines import DimensionReduced, ResolvedRate
@@ -32,6 +31,7 @@ from continuum_gym.evaluation.optimum.workers import (
 from continuum_gym.geometry import Frustum
 from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio, overlap_ratio_in, overlap_ratio_nb
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope import (
     endoscope_kinematics,
     make_endoscope_workspace,
@@ -48,7 +48,7 @@ VIEW_EFFORT = {
 
 
 # ====================================================================== view tracking
-@njit(cache=True)
+@kernel
 def overlap_batch(Q, p_a, R_a, robot, tan_half, near, far, out):
     """OR between the da Vinci camera (p_a, R_a) and the continuum camera of each row of Q (n, 6).
 
@@ -65,7 +65,7 @@ def overlap_batch(Q, p_a, R_a, robot, tan_half, near, far, out):
         out[i] = overlap_ratio_in(p_a, R_a, p_cam, R, tan_half, near, far, work)
 
 
-@njit(cache=True)
+@kernel
 def overlap_of_configuration(q, p_a, R_a, robot, tan_half, near, far):
     """OR between the da Vinci camera (p_a, R_a) and the continuum camera of configuration q (6,)."""
     p_cam = np.empty(3)

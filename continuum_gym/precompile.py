@@ -1,0 +1,197 @@
+"""``continuum-gym precompile``: compile the kernels once per install, so that a first ``step()`` takes a second.
+
+It runs every registered environment (each built-in task with each analytic base controller and without
+one, a single env and a native vector env) and the overlap ratio's entry points in a child process whose
+compiled kernels go to the precompiled set (:mod:`continuum_gym.robots.compiled`). The set is built in a
+new directory and moved into place when complete, so a killed run leaves the previous set (or none),
+never half of one. ``make setup`` runs it; so should an image or wheel build (``--portable`` for code
+that runs on any x86-64 CPU).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from continuum_gym.robots.compiled import PORTABLE_CPU, precompiled_dir, source_digest
+
+MANIFEST = "manifest.json"
+
+_WORKER_FLAG = "--worker"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default=None, help="directory of the precompiled set (default: "
+                        "CONTINUUM_GYM_PRECOMPILED_DIR or continuum_gym/_precompiled)")
+    parser.add_argument("--portable", action="store_true",
+                        help=f"compile for LLVM's '{PORTABLE_CPU}' CPU: loads on any machine of this architecture, "
+                        "runs somewhat slower than code compiled for this CPU")
+    parser.add_argument("--check", action="store_true",
+                        help="only report whether the set matches these sources (exit status 1 if not)")
+    parser.add_argument(_WORKER_FLAG, default=None, metavar="ENV_ID", help=argparse.SUPPRESS)
+    parser.add_argument("--position", type=int, default=0, help=argparse.SUPPRESS)
+
+
+def read_manifest(directory: Path) -> dict | None:
+    """The set's manifest (digest, CPU, numba version, kernels, seconds), or None when there is no set."""
+    try:
+        return json.loads((directory / MANIFEST).read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+
+
+def status(directory: Path) -> tuple[bool, str]:
+    """Whether the set in ``directory`` was built from these sources, and a sentence saying so."""
+    manifest = read_manifest(directory)
+    if manifest is None:
+        return False, f"no precompiled set in {directory}: kernels compile on first use (run `continuum-gym precompile`)"
+    if manifest.get("digest") != source_digest():
+        return False, (f"the precompiled set in {directory} was built from other sources or another compiler stack: "
+                       "it is ignored (rerun `continuum-gym precompile`)")
+    return True, (f"precompiled set in {directory}: {manifest['kernels']} compiled kernels for CPU "
+                  f"'{manifest['cpu']}', built in {manifest['seconds']:.0f} s")
+
+
+def warm_up(env_id: str, position: int = 0) -> None:
+    """Build and step every configuration of ``env_id`` whose kernels a user, the main job or the tests compile."""
+    import gymnasium as gym
+    import numpy as np
+    from tqdm.auto import tqdm
+
+    import continuum_gym  # noqa: F401  (registers the ids)
+    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.geometry import overlap_ratio
+
+    spec = get_spec(env_id)
+    config = spec.config_class
+    work = [{"task": task, "task_split": "test" if task in config.test_only_tasks else "train", "base_controller": base}
+            for base in (*spec.baselines, None) for task in config.builtin_tasks]
+    name = env_id.split("/")[-1]
+    bar = tqdm(total=len(work) + 3, desc=f"precompile {name}", position=position, leave=True)
+    for kwargs in work:
+        bar.set_postfix_str(f"{kwargs['task']}, {kwargs['base_controller']}")
+        env = gym.make(env_id, **kwargs)
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        for _ in range(2):
+            env.step(env.action_space.sample())
+        env.close()
+        bar.update()
+    for num_threads in (1, 2):
+        bar.set_postfix_str(f"vector env, {num_threads} thread(s)")
+        envs = gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads)
+        envs.reset(seed=0)
+        envs.action_space.seed(0)
+        for _ in range(2):
+            envs.step(envs.action_space.sample())
+        envs.close()
+        bar.update()
+    bar.set_postfix_str("library and reproduction")
+    for part in LIBRARY_WARM_UPS.get(env_id, ()):
+        part()
+    if env_id == _env_ids()[-1]:  # the overlap ratio's public entry points, once
+        overlap_ratio(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))  # one pair, then a batch
+        overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
+    bar.update()
+    bar.close()
+
+
+def _occlusion_library() -> None:
+    """The robot's and the baselines' batched Python API, as ``continuum-gym reproduce`` calls them."""
+    from continuum_gym.evaluation.reproduction import circle_part, hold_part
+    from continuum_gym.robots import MultiBackboneRobot
+
+    robot = MultiBackboneRobot()
+    hold_part(robot, 2, 0)
+    circle_part(robot)
+
+
+def _view_library() -> None:
+    from continuum_gym.evaluation.reproduction import case_part, coverage_part
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+
+    endoscope, davinci = ContinuumEndoscope(), DaVinciEndoscope()
+    coverage_part(endoscope, davinci, 3)
+    case_part(endoscope, davinci)
+
+
+LIBRARY_WARM_UPS = {"ContinuumGym/OcclusionAvoidance-v0": (_occlusion_library,),
+                    "ContinuumGym/ViewTracking-v0": (_view_library,)}
+
+
+def _env_ids() -> list:
+    from continuum_gym.envs.spec import ENV_SPECS
+
+    return list(ENV_SPECS)
+
+
+def build(out: Path, portable: bool = False) -> dict:
+    """Compile into a fresh directory beside ``out`` and move it into place; return the manifest.
+
+    One worker process per environment, run at once (each writes its own layer of the set), so the
+    build takes about as long as the slowest environment's first compile.
+    """
+    out = out.resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    building = out.with_name(f"{out.name}.building-{os.getpid()}")
+    shutil.rmtree(building, ignore_errors=True)
+    environ = dict(os.environ, CONTINUUM_GYM_PRECOMPILED_DIR=str(building))
+    if portable:
+        environ["NUMBA_CPU_NAME"] = PORTABLE_CPU
+    start = time.perf_counter()
+    try:
+        workers = [subprocess.Popen([sys.executable, "-m", "continuum_gym.cli", "precompile", _WORKER_FLAG, env_id,
+                                     "--position", str(index)], env=environ)
+                   for index, env_id in enumerate(_env_ids())]
+        codes = [worker.wait() for worker in workers]
+        if any(codes):
+            raise RuntimeError(f"continuum-gym precompile: a worker failed (exit codes {codes}); the previous set, "
+                               "if any, is left as it was")
+        import numba
+
+        manifest = {
+            "digest": source_digest(),
+            "cpu": PORTABLE_CPU if portable else _host_cpu(),
+            "numba": numba.__version__,
+            "kernels": sum(1 for _ in building.rglob("*.nbc")),
+            "seconds": round(time.perf_counter() - start, 1),
+        }
+        (building / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
+        previous = out.with_name(f"{out.name}.previous-{os.getpid()}")
+        if out.exists():
+            out.rename(previous)
+        building.rename(out)
+        shutil.rmtree(previous, ignore_errors=True)
+    finally:
+        shutil.rmtree(building, ignore_errors=True)
+    return manifest
+
+
+def _host_cpu() -> str:
+    import llvmlite.binding as llvm
+
+    return llvm.get_host_cpu_name()
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.worker:
+        from continuum_gym.robots.compiled import writing_precompiled
+
+        with writing_precompiled(layer=args.worker.split("/")[-1]):
+            warm_up(args.worker, args.position)
+        return 0
+    out = Path(args.out) if args.out else precompiled_dir()
+    if args.check:
+        ok, message = status(out)
+        print(message)
+        return 0 if ok else 1
+    manifest = build(out, portable=args.portable)
+    print(f"continuum-gym precompile: {manifest['kernels']} kernels for CPU '{manifest['cpu']}' in "
+          f"{manifest['seconds']:.0f} s -> {out}")
+    return 0

@@ -1,0 +1,183 @@
+"""Compiled kernels that start in a second: numba's JIT with a precompiled set shipped in the install.
+
+Every kernel of the package is declared with :func:`kernel` (``numba.njit`` with caching). Its compiled
+code is looked up in two places before numba compiles it:
+
+1. the *precompiled set*, ``continuum_gym/_precompiled/`` (or ``CONTINUUM_GYM_PRECOMPILED_DIR``), written
+   once per install by ``continuum-gym precompile`` (``make setup`` runs it). It is read only, and valid
+   only for the exact package sources, numba, llvmlite, numpy and Python it was built with: one digest of
+   all of them stamps every entry, so an edited source file, another numba or a different CPU makes the
+   set miss as a whole and never serves stale code (numba's own cache checks only the kernel's own file,
+   not the kernels it calls);
+2. numba's own cache (``NUMBA_CACHE_DIR`` or ``__pycache__``), where anything compiled at run time goes.
+
+Why not an ahead-of-time extension module: ``numba.pycc`` is deprecated, exports plain C functions
+that other kernels cannot call without a Python round trip, and would need every signature spelled
+out. The precompiled set holds exactly what numba's JIT would have produced (the same object code, so
+results are bit for bit those of a JIT compile), for the signatures the envs actually use.
+
+``continuum-gym precompile --portable`` builds the set for LLVM's generic x86-64 CPU instead of this
+machine's, so it can be shipped to other machines (e.g. inside a wheel or a container image); it loads
+on any CPU of the same architecture, at some speed cost (see the README).
+
+``CONTINUUM_GYM_PRECOMPILED=0`` ignores the set (measuring a JIT cold start, debugging a kernel).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import platform
+import sys
+from pathlib import Path
+from typing import Callable
+
+import llvmlite
+import numba
+import numpy as np
+from numba.core.caching import FunctionCache, IndexDataCacheFile
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_PRECOMPILED_DIR = PACKAGE_ROOT / "_precompiled"
+PORTABLE_CPU = "generic"
+
+# The layer a ``continuum-gym precompile`` worker writes; a module global, not thread-local: batch
+# chunks compile on worker threads.
+_writing = {"layer": None}
+
+
+def precompiled_dir() -> Path:
+    """Directory of the precompiled set: ``CONTINUUM_GYM_PRECOMPILED_DIR`` or ``continuum_gym/_precompiled``."""
+    override = os.environ.get("CONTINUUM_GYM_PRECOMPILED_DIR")
+    return Path(override) if override else DEFAULT_PRECOMPILED_DIR
+
+
+def precompiled_enabled() -> bool:
+    """False when ``CONTINUUM_GYM_PRECOMPILED=0``: kernels then come from numba's cache or its compiler."""
+    value = os.environ.get("CONTINUUM_GYM_PRECOMPILED", "1").strip().lower()
+    if value not in ("0", "1", "false", "true", "no", "yes", ""):
+        raise ValueError(f"CONTINUUM_GYM_PRECOMPILED must be 0 or 1; got {value!r}")
+    return value not in ("0", "false", "no")
+
+
+@functools.cache
+def source_digest() -> str:
+    """sha256 of every ``.py`` file of the package and of the compiler stack's versions.
+
+    It stamps the precompiled set: any edited source, another numba, llvmlite, numpy or Python gives
+    another digest, and the whole set misses instead of serving code compiled from other sources.
+    """
+    digest = hashlib.sha256()
+    for part in (sys.version, numba.__version__, llvmlite.__version__, np.__version__, platform.machine()):
+        digest.update(part.encode() + b"\0")
+    for path in sorted(PACKAGE_ROOT.rglob("*.py")):
+        digest.update(path.relative_to(PACKAGE_ROOT).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def portable_magic(codegen) -> tuple:
+    """numba's codegen key for LLVM's generic CPU of this target triple (``NUMBA_CPU_NAME=generic``)."""
+    return (codegen.magic_tuple()[0], PORTABLE_CPU, "")
+
+
+class writing_precompiled:
+    """Context in which compiled kernels go to ``layer`` of the precompiled set (``continuum-gym precompile``).
+
+    The set is a directory of layers, one per precompile worker (they run in parallel, so each writes
+    its own); a kernel is looked up in every layer.
+    """
+
+    def __init__(self, layer: str):
+        self.layer = layer
+
+    def __enter__(self) -> "writing_precompiled":
+        _writing["layer"] = self.layer
+        return self
+
+    def __exit__(self, *exc) -> None:
+        _writing["layer"] = None
+
+
+class PrecompiledFirstCache(FunctionCache):
+    """numba's per-function cache, consulted after the precompiled set (see the module docstring)."""
+
+    def __init__(self, py_func: Callable):
+        super().__init__(py_func)
+        self._module_dir = py_func.__module__.replace(".", "-")
+        self._set_dir = precompiled_dir()
+        self._layers = {}
+
+    def _layer(self, name: str) -> IndexDataCacheFile:
+        if name not in self._layers:
+            self._layers[name] = IndexDataCacheFile(
+                cache_path=str(self._set_dir / name / self._module_dir),
+                filename_base=self._impl.filename_base,
+                source_stamp=source_digest(),
+            )
+        return self._layers[name]
+
+    def _layer_names(self) -> list:
+        writing = _writing["layer"]
+        if writing is not None:
+            return [writing]
+        try:
+            return sorted(entry.name for entry in os.scandir(self._set_dir) if entry.is_dir())
+        except FileNotFoundError:
+            return []
+
+    def _precompiled_key(self, sig, magic: tuple) -> tuple:
+        sig_, _, code_hashes = self._index_key(sig, _FixedMagic(magic))
+        return (sig_, magic, code_hashes)
+
+    def _load_overload(self, sig, target_context):
+        if not self._enabled:
+            return None
+        writing = _writing["layer"] is not None
+        if writing or precompiled_enabled():
+            codegen = target_context.codegen()
+            for name in self._layer_names():
+                for magic in (codegen.magic_tuple(), portable_magic(codegen)):
+                    data = self._layer(name).load(self._precompiled_key(sig, magic))
+                    if data is not None:
+                        return self._impl.rebuild(target_context, data)
+        if writing:
+            return None  # compile, so that the set gets this signature
+        return super()._load_overload(sig, target_context)
+
+    def _save_overload(self, sig, data):
+        layer = _writing["layer"]
+        if layer is None:
+            return super()._save_overload(sig, data)
+        if not self._enabled or not self._impl.check_cachable(data):
+            return None
+        (self._set_dir / layer / self._module_dir).mkdir(parents=True, exist_ok=True)
+        key = self._precompiled_key(sig, data.codegen.magic_tuple())
+        self._layer(layer).save(key, self._impl.reduce(data))
+        return None
+
+
+class _FixedMagic:
+    """A stand-in codegen for ``Cache._index_key``: only its ``magic_tuple`` is read."""
+
+    def __init__(self, magic: tuple):
+        self._magic = magic
+
+    def magic_tuple(self) -> tuple:
+        return self._magic
+
+
+def kernel(func: Callable | None = None, **options):
+    """``numba.njit(cache=True, **options)`` whose compiled code also comes from the precompiled set.
+
+    Use as ``@kernel`` or ``@kernel(inline="always")``; options are numba's.
+    """
+
+    def decorate(py_func: Callable):
+        dispatcher = numba.njit(cache=True, **options)(py_func)
+        # numba has no public hook for a dispatcher's cache class; enable_caching() sets this attribute.
+        dispatcher._cache = PrecompiledFirstCache(py_func)
+        return dispatcher
+
+    return decorate if func is None else decorate(func)

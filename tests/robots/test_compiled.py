@@ -1,0 +1,153 @@
+"""The precompiled kernel set: what it serves, when it refuses to, and that every package kernel uses it."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import pkgutil
+import subprocess
+import sys
+import textwrap
+
+import pytest
+from numba.core.registry import CPUDispatcher
+
+import continuum_gym
+from continuum_gym import precompile
+from continuum_gym.robots import compiled
+
+# A kernel in its own module file (numba caches only functions with a source file). Each child process
+# calls it and reports its result's bits and whether numba found it in a cache or compiled it.
+TOY_MODULE = '''
+import math
+
+from continuum_gym.robots.compiled import kernel
+
+
+@kernel(inline="always")
+def helper(x):
+    return math.sin(x) * math.exp(-0.5 * x)
+
+
+@kernel
+def toy(n):
+    total = 0.0
+    for i in range(n):
+        total += helper(0.001 * i)
+    return total
+'''
+
+CHILD = '''
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from continuum_gym.robots import compiled
+if sys.argv[2] == "stale":
+    compiled.source_digest = lambda: "another source tree"
+import toy_kernels
+if sys.argv[2] == "write":
+    with compiled.writing_precompiled(layer="toy"):
+        value = toy_kernels.toy(1000)
+else:
+    value = toy_kernels.toy(1000)
+stats = toy_kernels.toy.stats
+print(json.dumps({"bits": value.hex(), "hits": sum(stats.cache_hits.values()),
+                  "misses": sum(stats.cache_misses.values())}))
+'''
+
+
+def run_child(tmp_path, mode: str, **env) -> dict:
+    environ = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"),
+                   CONTINUUM_GYM_PRECOMPILED_DIR=str(tmp_path / "set"), **env)
+    out = subprocess.run([sys.executable, "-c", CHILD, str(tmp_path / "src"), mode], env=environ,
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def nbc_files(directory) -> list:
+    return sorted(path.name for path in directory.rglob("*.nbc")) if directory.exists() else []
+
+
+@pytest.fixture
+def toy_tree(tmp_path):
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "toy_kernels.py").write_text(TOY_MODULE)
+    return tmp_path
+
+
+def test_precompiled_set_serves_the_same_code_without_numba_cache(toy_tree):
+    written = run_child(toy_tree, "write")
+    assert written["misses"] == 1 and written["hits"] == 0  # compiled, into the set only
+    assert nbc_files(toy_tree / "set" / "toy") and not nbc_files(toy_tree / "numba-cache")
+
+    loaded = run_child(toy_tree, "read")
+    assert loaded == {"bits": written["bits"], "hits": 1, "misses": 0}
+    assert not nbc_files(toy_tree / "numba-cache")  # nothing compiled, so nothing saved
+
+    # With the set switched off the same kernel compiles and goes to numba's own cache, same bits.
+    jit = run_child(toy_tree, "read", CONTINUUM_GYM_PRECOMPILED="0")
+    assert jit == {"bits": written["bits"], "hits": 0, "misses": 1}
+    assert nbc_files(toy_tree / "numba-cache")
+
+
+def test_set_built_from_other_sources_is_ignored(toy_tree):
+    run_child(toy_tree, "write")
+    stale = run_child(toy_tree, "stale")
+    assert stale["hits"] == 0 and stale["misses"] == 1
+
+
+def test_digest_follows_every_source_file(tmp_path, monkeypatch):
+    tree = tmp_path / "pkg"
+    (tree / "robots").mkdir(parents=True)
+    (tree / "robots" / "a.py").write_text("x = 1\n")
+    (tree / "b.py").write_text("y = 2\n")
+    monkeypatch.setattr(compiled, "PACKAGE_ROOT", tree)
+    digests = []
+    for edit in (None, ("b.py", "y = 3\n"), ("robots/a.py", "x = 1  # a comment\n")):
+        if edit:
+            (tree / edit[0]).write_text(edit[1])
+        compiled.source_digest.cache_clear()
+        digests.append(compiled.source_digest())
+    compiled.source_digest.cache_clear()
+    assert len(set(digests)) == 3
+
+
+def test_switch_names_the_variable_and_its_values(monkeypatch):
+    monkeypatch.setenv("CONTINUUM_GYM_PRECOMPILED", "maybe")
+    with pytest.raises(ValueError, match="CONTINUUM_GYM_PRECOMPILED must be 0 or 1"):
+        compiled.precompiled_enabled()
+    monkeypatch.setenv("CONTINUUM_GYM_PRECOMPILED", "0")
+    assert not compiled.precompiled_enabled()
+
+
+def test_every_package_kernel_looks_in_the_precompiled_set():
+    kernels = []
+    for info in pkgutil.walk_packages(continuum_gym.__path__, "continuum_gym."):
+        module = importlib.import_module(info.name)
+        kernels += [value for value in vars(module).values()
+                    if isinstance(value, CPUDispatcher) and value.py_func.__module__ == info.name]
+    assert len(kernels) > 100
+    plain = [k.py_func.__qualname__ for k in kernels if not isinstance(k._cache, compiled.PrecompiledFirstCache)]
+    assert plain == []
+
+
+def test_status_reports_missing_stale_and_fresh_sets(tmp_path):
+    ok, message = precompile.status(tmp_path)
+    assert not ok and "no precompiled set" in message
+    manifest = {"digest": "other", "cpu": "generic", "numba": "0", "kernels": 3, "seconds": 1.0}
+    (tmp_path / precompile.MANIFEST).write_text(json.dumps(manifest))
+    ok, message = precompile.status(tmp_path)
+    assert not ok and "other sources" in message
+    manifest["digest"] = compiled.source_digest()
+    (tmp_path / precompile.MANIFEST).write_text(json.dumps(manifest))
+    ok, message = precompile.status(tmp_path)
+    assert ok and "3 compiled kernels" in message
+
+
+def test_check_flag_exit_status(tmp_path):
+    command = [sys.executable, "-m", "continuum_gym.cli", "precompile", "--check", "--out", str(tmp_path)]
+    assert subprocess.run(command, capture_output=True).returncode == 1
+    (tmp_path / precompile.MANIFEST).write_text(json.dumps(
+        {"digest": compiled.source_digest(), "cpu": "x", "numba": "0", "kernels": 1, "seconds": 1.0}))
+    out = subprocess.run(command, capture_output=True, text=True)
+    assert out.returncode == 0, textwrap.shorten(out.stderr, 300)
