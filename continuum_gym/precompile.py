@@ -19,8 +19,6 @@ import sys
 import time
 from pathlib import Path
 
-from continuum_gym.robots.compiled import PORTABLE_CPU, precompiled_dir, source_digest
-
 MANIFEST = "manifest.json"
 
 _WORKER_FLAG = "--worker"
@@ -30,11 +28,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="directory of the precompiled set (default: "
                         "CONTINUUM_GYM_PRECOMPILED_DIR or continuum_gym/_precompiled)")
     parser.add_argument("--portable", action="store_true",
-                        help=f"compile for LLVM's '{PORTABLE_CPU}' CPU: loads on any machine of this architecture, "
+                        help="compile for LLVM's 'generic' CPU: loads on any machine of this architecture, "
                         "runs somewhat slower than code compiled for this CPU")
     parser.add_argument("--check", action="store_true",
                         help="only report whether the set matches these sources (exit status 1 if not)")
-    parser.add_argument(_WORKER_FLAG, default=None, metavar="ENV_ID", help=argparse.SUPPRESS)
+    parser.add_argument(_WORKER_FLAG, default=None, choices=_env_ids(), help=argparse.SUPPRESS)
     parser.add_argument("--position", type=int, default=0, help=argparse.SUPPRESS)
 
 
@@ -48,6 +46,8 @@ def read_manifest(directory: Path) -> dict | None:
 
 def status(directory: Path) -> tuple[bool, str]:
     """Whether the set in ``directory`` was built from these sources, and a sentence saying so."""
+    from continuum_gym.robots.compiled import source_digest
+
     manifest = read_manifest(directory)
     if manifest is None:
         return False, f"no precompiled set in {directory}: kernels compile on first use (run `continuum-gym precompile`)"
@@ -137,6 +137,8 @@ def build(out: Path, portable: bool = False) -> dict:
     One worker process per environment, run at once (each writes its own layer of the set), so the
     build takes about as long as the slowest environment's first compile.
     """
+    from continuum_gym.robots.compiled import PORTABLE_CPU, source_digest
+
     out = out.resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
     building = out.with_name(f"{out.name}.building-{os.getpid()}")
@@ -186,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
         with writing_precompiled(layer=args.worker.split("/")[-1]):
             warm_up(args.worker, args.position)
         return 0
+    from continuum_gym.robots.compiled import precompiled_dir
+
     out = Path(args.out) if args.out else precompiled_dir()
     if args.check:
         ok, message = status(out)
