@@ -39,10 +39,12 @@ def _clip_rows(array, clipped):
 def check_actions(actions, shape, name: str = "action") -> tuple[np.ndarray, np.ndarray]:
     """Validate actions: exact shape, finite; clip to [-1, 1] and report which rows were clipped.
 
-    Returns a fresh (N, d) float64 array (the caller's array is never modified) and a bool mask (N,).
+    Returns a fresh C-ordered (N, d) float64 array (the caller's array is never modified) and a bool
+    mask (N,). C order whatever the input's layout (a transposed torch tensor, a Fortran-ordered batch):
+    an array of another layout would take numba's dispatcher and compile the step kernel again for it.
     """
     try:
-        array = np.array(actions, dtype=np.float64, ndmin=1)
+        array = np.array(actions, dtype=np.float64, ndmin=1, order="C")
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} must be a numeric array of shape {shape}") from error
     if array.shape != shape:

@@ -545,3 +545,26 @@ def test_episodes_last_their_tasks_duration_with_no_registered_cut():
     short = gym.make(OCCLUSION, task="hold")
     short.reset(seed=0)
     assert short.unwrapped.episode_steps == 150
+
+
+@pytest.mark.parametrize("env_id", ["ContinuumGym/OcclusionAvoidance-v0", "ContinuumGym/ViewTracking-v0"])
+def test_actions_of_any_layout_step_the_same_compiled_kernel(env_id):
+    """A Fortran-ordered or strided action batch is copied to C order: the same bits, and no new
+    specialisation of the step kernel (which would compile it again, ~25-60 s)."""
+    envs = [gym.make_vec(env_id, num_envs=4, vectorization_mode="vector_entry_point") for _ in range(2)]
+    for venv in envs:
+        venv.reset(seed=3)
+    kernel = envs[0].core._step_call.kernel
+    rng = np.random.default_rng(1)
+    k = envs[0].single_action_space.shape[0]
+    envs[0].step(np.zeros((4, k)))
+    envs[1].step(np.zeros((4, k)))
+    signatures = len(kernel.signatures)  # other tests in this process may have compiled other layouts
+    for layout in ("F", "strided", "F"):
+        actions = rng.uniform(-1, 1, (4, k))
+        other = np.asfortranarray(actions) if layout == "F" else np.repeat(actions, 2, axis=1)[:, ::2]
+        assert not other.flags.c_contiguous
+        results = envs[0].step(actions), envs[1].step(other)
+        for mine, theirs in zip(results[0][:3], results[1][:3]):
+            np.testing.assert_array_equal(mine, theirs)
+    assert len(kernel.signatures) == signatures
