@@ -28,8 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="directory of the precompiled set (default: "
                         "CONTINUUM_GYM_PRECOMPILED_DIR or continuum_gym/_precompiled)")
     parser.add_argument("--portable", action="store_true",
-                        help="compile for LLVM's 'generic' CPU: loads on any machine of this architecture, "
-                        "runs somewhat slower than code compiled for this CPU")
+                        help="compile for LLVM's 'generic' CPU: loads on any machine of this architecture (measured "
+                        "as fast as code compiled for this CPU, same bits: see the README)")
     parser.add_argument("--check", action="store_true",
                         help="only report whether the set matches these sources (exit status 1 if not)")
     parser.add_argument(_WORKER_FLAG, default=None, choices=_env_ids(), help=argparse.SUPPRESS)
