@@ -131,7 +131,7 @@ def _env_ids() -> list:
     return list(ENV_SPECS)
 
 
-def build(out: Path, portable: bool = False) -> dict:
+def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dict:
     """Compile into a fresh directory beside ``out`` and move it into place; return the manifest.
 
     One worker process per environment, run at once (each writes its own layer of the set), so the
@@ -150,7 +150,7 @@ def build(out: Path, portable: bool = False) -> dict:
     try:
         workers = [subprocess.Popen([sys.executable, "-m", "continuum_gym.cli", "precompile", _WORKER_FLAG, env_id,
                                      "--position", str(index)], env=environ)
-                   for index, env_id in enumerate(_env_ids())]
+                   for index, env_id in enumerate(env_ids or _env_ids())]
         codes = [worker.wait() for worker in workers]
         if any(codes):
             raise RuntimeError(f"continuum-gym precompile: a worker failed (exit codes {codes}); the previous set, "

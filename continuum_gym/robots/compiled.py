@@ -37,7 +37,7 @@ from typing import Callable
 import llvmlite
 import numba
 import numpy as np
-from numba.core.caching import FunctionCache, IndexDataCacheFile
+from numba.core.caching import FunctionCache, IndexDataCacheFile  # numba >= 0.49; tested with 0.68
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_PRECOMPILED_DIR = PACKAGE_ROOT / "_precompiled"
@@ -178,7 +178,10 @@ def kernel(func: Callable | None = None, **options):
     def decorate(py_func: Callable):
         dispatcher = numba.njit(cache=True, **options)(py_func)
         # numba has no public hook for a dispatcher's cache class; enable_caching() sets this attribute.
-        dispatcher._cache = PrecompiledFirstCache(py_func)
+        # Should a future numba change it, kernels keep numba's own cache (tests/robots/test_compiled.py
+        # fails then, so it does not go unnoticed).
+        if isinstance(getattr(dispatcher, "_cache", None), FunctionCache):
+            dispatcher._cache = PrecompiledFirstCache(py_func)
         return dispatcher
 
     return decorate if func is None else decorate(func)

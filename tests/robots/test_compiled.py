@@ -151,3 +151,14 @@ def test_check_flag_exit_status(tmp_path):
         {"digest": compiled.source_digest(), "cpu": "x", "numba": "0", "kernels": 1, "seconds": 1.0}))
     out = subprocess.run(command, capture_output=True, text=True)
     assert out.returncode == 0, textwrap.shorten(out.stderr, 300)
+
+
+def test_a_failed_build_leaves_the_previous_set_as_it_was(tmp_path):
+    out = tmp_path / "set"
+    (out / "layer").mkdir(parents=True)
+    (out / "layer" / "kernel.nbc").write_bytes(b"previous")
+    (out / precompile.MANIFEST).write_text("{}")
+    with pytest.raises(RuntimeError, match="a worker failed"):
+        precompile.build(out, env_ids=["ContinuumGym/NoSuchEnv-v0"])  # the worker refuses the id
+    assert (out / "layer" / "kernel.nbc").read_bytes() == b"previous"
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["set"]  # no half-built directory left
