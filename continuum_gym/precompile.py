@@ -76,21 +76,11 @@ def warm_up(env_id: str, position: int = 0) -> None:
     bar = tqdm(total=len(work) + 3, desc=f"precompile {name}", position=position, leave=True)
     for kwargs in work:
         bar.set_postfix_str(f"{kwargs['task']}, {kwargs['base_controller']}")
-        env = gym.make(env_id, **kwargs)
-        env.reset(seed=0)
-        env.action_space.seed(0)
-        for _ in range(2):
-            env.step(env.action_space.sample())
-        env.close()
+        _step_twice(gym.make(env_id, **kwargs))
         bar.update()
     for num_threads in (1, 2):
         bar.set_postfix_str(f"vector env, {num_threads} thread(s)")
-        envs = gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads)
-        envs.reset(seed=0)
-        envs.action_space.seed(0)
-        for _ in range(2):
-            envs.step(envs.action_space.sample())
-        envs.close()
+        _step_twice(gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads))
         bar.update()
     bar.set_postfix_str("library and reproduction")
     for part in LIBRARY_WARM_UPS.get(env_id, ()):
@@ -100,6 +90,15 @@ def warm_up(env_id: str, position: int = 0) -> None:
         overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
     bar.update()
     bar.close()
+
+
+def _step_twice(env) -> None:
+    """Reset and two seeded random steps: every kernel of a reset and a step compiles."""
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for _ in range(2):
+        env.step(env.action_space.sample())
+    env.close()
 
 
 def _occlusion_library() -> None:

@@ -128,19 +128,16 @@ class PrecompiledFirstCache(FunctionCache):
         except FileNotFoundError:
             return []
 
-    def _precompiled_key(self, sig, magic: tuple) -> tuple:
-        sig_, _, code_hashes = self._index_key(sig, _FixedMagic(magic))
-        return (sig_, magic, code_hashes)
-
     def _load_overload(self, sig, target_context):
         if not self._enabled:
             return None
         writing = _writing["layer"] is not None
         if writing or precompiled_enabled():
             codegen = target_context.codegen()
+            sig_key, host_magic, code_hashes = self._index_key(sig, codegen)
             for name in self._layer_names():
-                for magic in (codegen.magic_tuple(), portable_magic(codegen)):
-                    data = self._layer(name).load(self._precompiled_key(sig, magic))
+                for magic in (host_magic, portable_magic(codegen)):
+                    data = self._layer(name).load((sig_key, magic, code_hashes))
                     if data is not None:
                         return self._impl.rebuild(target_context, data)
         if writing:
@@ -154,19 +151,8 @@ class PrecompiledFirstCache(FunctionCache):
         if not self._enabled or not self._impl.check_cachable(data):
             return None
         (self._set_dir / layer / self._module_dir).mkdir(parents=True, exist_ok=True)
-        key = self._precompiled_key(sig, data.codegen.magic_tuple())
-        self._layer(layer).save(key, self._impl.reduce(data))
+        self._layer(layer).save(self._index_key(sig, data.codegen), self._impl.reduce(data))
         return None
-
-
-class _FixedMagic:
-    """A stand-in codegen for ``Cache._index_key``: only its ``magic_tuple`` is read."""
-
-    def __init__(self, magic: tuple):
-        self._magic = magic
-
-    def magic_tuple(self) -> tuple:
-        return self._magic
 
 
 def kernel(func: Callable | None = None, **options):
