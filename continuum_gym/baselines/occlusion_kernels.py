@@ -104,7 +104,7 @@ def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scr
 
 # Not inlined, unlike its helpers: inlined into the step and observe kernels it would save ~10 % of an
 # occlusion step (its entry's reference counts) but add ~20 s to the first compile.
-@kernel
+@kernel(borrows=True)
 def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     """Eqs (22)-(24) for a desired twist ``xi`` (6,), with J and the tip in ``scratch`` and the frames in
     ``ws`` already (``tip_kernel`` at q leaves both).

@@ -72,7 +72,7 @@ def make_view_scratch():
                        np.empty(3))
 
 
-@kernel
+@kernel(borrows=True)
 def view_errors(q, p_tgt, R_tgt, robot, scratch):
     """FK + Jacobian into scratch; returns (eps_p (m), eps_R (rad)); e_p in twist[:3], e_w in e_w."""
     p_ct, e_w, twist = scratch.p_ct, scratch.e_w, scratch.twist
@@ -104,7 +104,7 @@ def damped_pinv_rows(A, damping, out, work3, ones, X):
     return ok
 
 
-@kernel
+@kernel(borrows=True)
 def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     """Joint rates (SI) for one step into ``qdot``; returns (eps_p, eps_R, frozen_bits).
 
@@ -131,12 +131,7 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
     # The limits are read into locals once: reading a bundle's array costs a reference count each time.
     lower, upper = prm.lower, prm.upper
     if prm.method == RMRC:
-        pinv = np.linalg.pinv(Jmm, rcond=1e-15)
-        for k in range(6):
-            acc = 0.0
-            for a in range(6):
-                acc += pinv[k, a] * twist[a]
-            qdot[k] = acc
+        rmrc_rates(Jmm, twist, qdot)
     else:
         for k in range(6):
             mask[k] = 1.0
@@ -156,6 +151,19 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
                 break
     qdot[0] /= MM_PER_M
     return eps_p, eps_r, frozen_bits
+
+
+# A kernel of its own, with reference counting: LAPACK's pseudo-inverse allocates, which a borrowing
+# kernel (view_rates_kernel) cannot.
+@kernel
+def rmrc_rates(Jmm, twist, qdot):
+    """qdot (6,) = pinv(Jmm) twist with the undamped pseudo-inverse of the full 6 x 6 J (mm, rad)."""
+    pinv = np.linalg.pinv(Jmm, rcond=1e-15)
+    for k in range(6):
+        acc = 0.0
+        for a in range(6):
+            acc += pinv[k, a] * twist[a]
+        qdot[k] = acc
 
 
 @kernel(inline="always")
@@ -201,7 +209,7 @@ def dr_solution(Jmm, twist, mask, damping, scratch, qdot):
             qdot[k] = first[k] + pc[k, 0] * r[0] + pc[k, 1] * r[1] + pc[k, 2] * r[2]
 
 
-@kernel
+@kernel(borrows=True)
 def integrate_view_step(q, qdot, dt, lower, upper, out):
     """Euler step, clamped to the position limits (eq 13), deltas wrapped; returns clamped-joint bits."""
     clamped = 0

@@ -133,7 +133,21 @@ def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
     return RewardSlot(fns, params, np.array(list(weights), dtype=np.float64))
 
 
-@kernel(inline="always")
+# The slots' typed lists need numba's reference counting, which the step kernels' rows run without
+# (``kernel(borrows=True)``): so the calls into a slot are kernels of their own, with it.
+@kernel
+def occlusion_slot_rates(custom, q, gamma, p_des, R_des, v_des, dt, robot, cone, out):
+    """The registered OcclusionAvoidance controller of slot ``custom``: its command (dof + 1,) into ``out``."""
+    custom.rates[0](q, gamma, p_des, R_des, v_des, dt, robot, cone, custom.params, out)
+
+
+@kernel
+def view_slot_rates(custom, q, p_target, R_target, dt, robot, out):
+    """The registered ViewTracking controller of slot ``custom``: its joint rates (6,) into ``out``."""
+    custom.rates[0](q, p_target, R_target, dt, robot, custom.params, out)
+
+
+@kernel
 def add_reward_terms(i, slot, metrics, flags, actions, terms, first):
     """terms[i, first + k] = w_k fn_k(metrics[i], flags[i], actions[i], params_k); returns their sum."""
     total = 0.0

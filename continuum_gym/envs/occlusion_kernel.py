@@ -32,7 +32,7 @@ from continuum_gym.envs.common_kernels import (
     desired_point,
     desired_rotation,
 )
-from continuum_gym.envs.custom import row_reward
+from continuum_gym.envs.custom import occlusion_slot_rates, row_reward
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.compiled import kernel
@@ -128,7 +128,7 @@ def view_fraction_at(p, gamma, cone):
     return math.atan2(math.sqrt(xl * xl + yl * yl), zl) / cone.beta
 
 
-@kernel
+@kernel(borrows=True)
 def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
     """Endoscope rate with the residual's share scaled back so the tip p stays within ``bound`` half-angles.
 
@@ -148,7 +148,7 @@ def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
     return base_rate + low * residual_rate, True
 
 
-@kernel
+@kernel(borrows=True, no_cpython_wrapper=True)
 def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     """Geometry at the state of row i: next baseline command (cached), observation and metrics.
 
@@ -172,7 +172,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     qdot = work.qdot
     base_cmd = out.base_cmd
     if env.has_base and custom is not None:
-        custom.rates[0](q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, custom.params, work.full_cmd)
+        occlusion_slot_rates(custom, q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, work.full_cmd)
         tip_kernel(q, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
             base_cmd[i, k] = work.full_cmd[k]
@@ -235,7 +235,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     clip_observation(o, OBS_LIMIT)
 
 
-@kernel
+@kernel(borrows=True, no_cpython_wrapper=True)
 def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
@@ -278,7 +278,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
         elif env.has_base and custom is not None:
             desired_point(tasks, i, t, p_des, v_des)
             R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
-            custom.rates[0](q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, custom.params, work.full_cmd)
+            occlusion_slot_rates(custom, q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, work.full_cmd)
             for k in range(dof):
                 qdot[k] = work.full_cmd[k]
             gd = work.full_cmd[dof]

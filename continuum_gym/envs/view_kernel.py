@@ -25,7 +25,7 @@ from continuum_gym.baselines.view_tracking import (
     view_rates_kernel,
 )
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
-from continuum_gym.envs.custom import row_reward
+from continuum_gym.envs.custom import row_reward, view_slot_rates
 from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio_in
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.davinci import davinci_pose
@@ -65,7 +65,7 @@ ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "d
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
 
-@kernel
+@kernel(borrows=True, no_cpython_wrapper=True)
 def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
     """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
 
@@ -80,7 +80,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
     davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
     base_cmd = out.base_cmd
     if env.has_base and custom is not None:
-        custom.rates[0](q, p_tgt, R_dv, control_dt, robot, custom.params, qdot)
+        view_slot_rates(custom, q, p_tgt, R_dv, control_dt, robot, qdot)
         eps_p, eps_r = view_errors(q, p_tgt, R_dv, robot, scratch)
         for k in range(6):
             base_cmd[i, k] = qdot[k]
@@ -133,7 +133,7 @@ def make_view_step_work():
                         make_overlap_work())
 
 
-@kernel
+@kernel(borrows=True, no_cpython_wrapper=True)
 def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, work, cmd):
     """The baseline's joint rates towards the da Vinci target moved by the action (target-space residual).
 
@@ -152,12 +152,12 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
         for b in range(3):
             R_goal[a, b] = turn[a, 0] * R_dv[0, b] + turn[a, 1] * R_dv[1, b] + turn[a, 2] * R_dv[2, b]
     if custom is not None:
-        custom.rates[0](q, p_tgt, R_goal, env.control_dt, robot, custom.params, cmd)
+        view_slot_rates(custom, q, p_tgt, R_goal, env.control_dt, robot, cmd)
     else:
         view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
 
 
-# Inlined into view_step_batch, its only caller (so typed once, as before): no call per row that counts
+# Inlined into view_step_rows, its only caller (so typed once, as before): no call per row that counts
 # references to every array of the bundles it passes, and no library of its own to optimise and load.
 # Native N=64 182 k -> 198 k steps/s (one thread, paired), single step 10.1 -> 9.65 us, first compile
 # -1.8 s. The same for the occlusion row measured even (its substeps dominate), so it is left as it was.
@@ -213,7 +213,15 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
 def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
     marked ``OBSERVE_ONLY`` (releases the GIL; see occlusion_kernel)."""
-    work = make_view_step_work()
+    view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out,
+                   make_view_step_work(), start, stop)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work, start,
+                   stop):
+    """``view_step_batch``'s loop on a given work: apart from its allocation, so that the rows run without
+    reference counts (``kernel(borrows=True)``)."""
     for i in range(start, stop):
         mode = active[i]
         if mode == OBSERVE_ONLY:

@@ -34,7 +34,7 @@ from continuum_gym.validation import as_finite, integer
 VOI_SAMPLES_PER_SEGMENT = 40
 
 
-@kernel
+@kernel(borrows=True)
 def voi_kernel(points, gamma, cone, lens, dr):
     """(voi, nu, r_e, r_max) of one sampled backbone ``points`` (m, 3); ``lens`` (m, 3), ``dr`` (m, 2) scratch.
 
@@ -97,7 +97,7 @@ def voi_kernel(points, gamma, cone, lens, dr):
     return voi, nu, r_e, r_max
 
 
-@kernel
+@kernel(borrows=True)
 def voi_of_configuration(q, robot, ws, gamma, cone, n_per_segment, points, lens, dr):
     """VOI tuple of one configuration; ``points``, ``lens`` (m, 3) and ``dr`` (m, 2) are scratch."""
     backbone_kernel(q, robot, ws, n_per_segment, points)

@@ -45,7 +45,7 @@ _FACES = FACE_VERTICES  # numba freezes this global as a constant
 _POLY_CAPACITY = 256  # a 4-gon clipped 6 times has at most 4 * 2**6 vertices (<= 10 if exactly convex)
 
 
-@kernel
+@kernel(borrows=True)
 def local_geometry(t, near, far, verts, planes):
     """Fill the camera-frame vertices (8, 3) and half-spaces (6, 4) (order as in ``frustum.py``)."""
     a = t * near
@@ -88,7 +88,7 @@ def make_overlap_work():
     )
 
 
-@kernel
+@kernel(borrows=True)
 def overlap_pair(pa, Ra, pb, Rb, t, near, far, lv, lh, vb, hb, cut, poly, dist):
     """OR for one pair; lv, lh: camera-frame vertices/half-spaces of the frustum; the rest is workspace."""
     # pose of camera b in camera frame a: p = Ra^T (pb - pa), Rr = Ra^T Rb
@@ -281,7 +281,7 @@ def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
     return overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)
 
 
-@kernel
+@kernel(borrows=True)
 def overlap_ratio_in(p_a, R_a, p_b, R_b, tan_half, near, far, work):
     """:func:`overlap_ratio_nb` with its work arrays passed (an ``OverlapWork``): same arithmetic, no allocation.
 

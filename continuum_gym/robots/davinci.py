@@ -63,7 +63,7 @@ def stem_rotation(yaw, pitch, roll, R):
     R[2, 2] = cy * cp
 
 
-@kernel
+@kernel(borrows=True)
 def davinci_pose(q_dv, dv, clip, p_cam, R_cam, p_tgt):
     """Camera (= visual target) frame and target point of one da Vinci configuration (paper-notes §2.2).
 

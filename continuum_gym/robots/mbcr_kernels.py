@@ -190,7 +190,7 @@ def add_columns(V, W, row, arm0, arm1, arm2, col0, Jv, Jw, with_angular):
             Jw[2, col] = w2
 
 
-@kernel
+@kernel(borrows=True)
 def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
     delta = q[2 * segment + 1]
@@ -321,7 +321,7 @@ def points_batch(qs, robot, segments, fractions, P, JV):
     return True
 
 
-@kernel
+@kernel(borrows=True)
 def backbone_kernel(q, robot, ws, n_per_segment, out):
     """Backbone samples from the channel exit (paper-notes §1.3 item 13).
 
