@@ -123,7 +123,7 @@ def remove_worktree(tree: Tree) -> None:
 
 # ---------------------------------------------------------------------------------------------- runs
 #: Scripts that use public names only, so a tree that predates them runs the newest tree's copy.
-PORTABLE_SCRIPTS = ("memory",)
+PORTABLE_SCRIPTS = ("memory", "batch")
 
 
 def script_path(tree: Tree, script: str, newest: Tree) -> Path:

@@ -132,7 +132,7 @@ class OcclusionCore(BatchedCore):
         self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.num_threads = step_threads(num_threads)
-        self.n_chunks = parallel_chunks(n, self.num_threads)
+        self.n_chunks = parallel_chunks(n, self.num_threads, self.parallel_min_rows)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         guard = self.visibility_guard

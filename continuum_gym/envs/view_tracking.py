@@ -72,6 +72,9 @@ class ViewTrackingCore(BatchedCore):
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(view_step_batch)
+    # A row costs ~3 us: at N = 64 waking a second thread cost more than it saved (2 threads 256 k against
+    # 1 thread 294 k steps/s); from N = 128 it pays (410 k against 338 k). benchmarks/batch.py
+    parallel_min_rows = 128
     info_fields = INFO_FIELDS
     metric_columns = {"overlap_ratio": METRIC_OR, "position_error_m": METRIC_POSITION_ERROR,
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR}
@@ -115,7 +118,7 @@ class ViewTrackingCore(BatchedCore):
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.num_threads = step_threads(num_threads)
-        self.n_chunks = parallel_chunks(n, self.num_threads)
+        self.n_chunks = parallel_chunks(n, self.num_threads, self.parallel_min_rows)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
@@ -248,7 +251,7 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
     [0, pi/2]; deltas wrapped to [-pi, pi); clamping is reported in ``info["clamped_joints"]``.
     Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"``,
     ``"endoscope"`` or ``"davinci"``).
-    ``num_threads``: threads a batch of 32 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
+    ``num_threads``: threads a batch of 128 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
     default 1 when torch is loaded in the process, so a learner's own threads are not oversubscribed,
     else all of numba's threads); results do not depend on it.
 

@@ -190,7 +190,7 @@ def add_columns(V, W, row, arm0, arm1, arm2, col0, Jv, Jw, with_angular):
             Jw[2, col] = w2
 
 
-@kernel(borrows=True)
+@kernel
 def body_point(q, robot, ws, segment, sigma, out):
     """World position (m) of the backbone point at arc fraction ``sigma`` of ``segment`` (frames in ws)."""
     delta = q[2 * segment + 1]
@@ -218,7 +218,7 @@ def point_in_world(R_base, g_base, segment, length, cd, sd, a, b):
     return x, y, z
 
 
-@kernel
+@kernel(borrows=True)
 def tip_kernel(q, robot, ws, p, R, J):
     """Tip position, rotation and 6 x dof Jacobian [v; w] in {w} (eq 2 with paper-notes §1.2) for one q.
 

@@ -206,16 +206,19 @@ def test_sb3_adapter_infos_actions_and_registered_ids():
 def test_num_threads_is_checked_and_changes_no_result():
     import numba
 
-    runs = []
-    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
-        venv = vector(OCCLUSION, n=64, task="random", num_threads=threads)
-        assert venv.unwrapped.core.num_threads == threads
-        venv.reset(seed=3)
-        rng = np.random.default_rng(0)
-        for _ in range(5):
-            obs, *_ = venv.step(rng.uniform(-1, 1, (64, 8)).astype(np.float32))
-        runs.append(obs)
-    np.testing.assert_array_equal(runs[0], runs[1])
+    # Each env at the smallest batch its core steps on several threads (the caller's thread and a pool).
+    for env_id, n, kwargs in ((OCCLUSION, 64, {"task": "random"}), (VIEW, 128, {})):
+        runs = []
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            venv = vector(env_id, n=n, num_threads=threads, **kwargs)
+            assert venv.unwrapped.core.num_threads == threads
+            venv.reset(seed=3)
+            rng = np.random.default_rng(0)
+            for _ in range(5):
+                obs, *_ = venv.step(rng.uniform(-1, 1, venv.action_space.shape).astype(np.float32))
+            runs.append(obs)
+        assert venv.unwrapped.core.n_chunks == (threads if threads > 1 else 1)
+        np.testing.assert_array_equal(runs[0], runs[1])
     # torch is loaded in this test process: the default leaves the cores to the learner.
     assert vector(VIEW, n=64).unwrapped.core.num_threads == 1
     for bad in (0, numba.config.NUMBA_NUM_THREADS + 1, 1.5, "2"):
@@ -232,7 +235,7 @@ def test_stepping_a_batch_leaves_the_process_openmp_thread_count_alone():
 
     probe = (
         "import gymnasium as gym, numpy as np, continuum_gym\n"
-        "venv = gym.make_vec('ContinuumGym/ViewTracking-v0', num_envs=64, vectorization_mode='vector_entry_point')\n"
+        "venv = gym.make_vec('ContinuumGym/ViewTracking-v0', num_envs=128, vectorization_mode='vector_entry_point')\n"
         "venv.reset(seed=0)\n"
         "for _ in range(3):\n"
         "    venv.step(np.zeros(venv.action_space.shape, dtype=np.float32))\n"
