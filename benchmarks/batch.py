@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -29,29 +28,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import finish, machine, print_table  # noqa: E402
+from common import finish, machine, print_table, vector_env_rate  # noqa: E402
 
 import continuum_gym  # noqa: E402
 
 ENV_IDS = ("ContinuumGym/OcclusionAvoidance-v0", "ContinuumGym/ViewTracking-v0")
 UNITS = {"native.*": "steps/s", "sync64.*": "steps/s", "ratio64.*": "(derived)", "peak_rss_mib": "MiB",
          "machine.*": "info"}
-
-
-def best_rate(venv, n: int, actions: np.ndarray, seconds: float, windows: int = 3) -> float:
-    """Best steps/s over ``windows`` timed windows of ``seconds`` (the machine is shared: take the best)."""
-    venv.reset(seed=0)
-    for k in range(3):
-        venv.step(actions[k % len(actions)])
-    best = 0.0
-    for _ in range(windows):
-        count = 0
-        start = time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            venv.step(actions[count % len(actions)])
-            count += 1
-        best = max(best, count * n / (time.perf_counter() - start))
-    return best
 
 
 def action_sets(space_shape: tuple, n: int) -> dict:
@@ -74,7 +57,7 @@ def main(argv=None) -> int:
     rows = []
     for env_id in ENV_IDS:
         sync = gym.make_vec(env_id, num_envs=64, vectorization_mode="sync")
-        sync_rate = best_rate(sync, 64, action_sets(sync.single_action_space.shape, 64)["zero"], seconds)
+        sync_rate = vector_env_rate(sync, action_sets(sync.single_action_space.shape, 64)["zero"], seconds)
         sync.close()
         results[f"sync64.{env_id}"] = sync_rate
         rows.append((env_id, "SyncVectorEnv N=64, 1 thread", "zero", f"{sync_rate:,.0f}", "1.00x"))
@@ -82,7 +65,7 @@ def main(argv=None) -> int:
             for threads in thread_counts:
                 venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", num_threads=threads)
                 for kind, actions in action_sets(venv.single_action_space.shape, n).items():
-                    value = best_rate(venv, n, actions, seconds)
+                    value = vector_env_rate(venv, actions, seconds)
                     results[f"native.{env_id}.{n}.{threads}t.{kind}"] = value
                     rows.append((env_id, f"native N={n}, {threads} thread(s)", kind, f"{value:,.0f}",
                                  f"{value / sync_rate:.2f}x"))

@@ -25,6 +25,24 @@ def best_seconds(fn, number: int, repeat: int = 5) -> float:
     return best
 
 
+def vector_env_rate(venv, actions, seconds: float, windows: int = 3) -> float:
+    """Best robot-steps/s of ``venv.step`` over ``windows`` timed windows of ``seconds``, cycling through the
+    action batches ``actions`` (B, N, k) after a reset and 3 warm-up steps (the machine is shared: the best)."""
+    n = actions.shape[1]
+    venv.reset(seed=0)
+    for k in range(3):
+        venv.step(actions[k % len(actions)])
+    best = 0.0
+    for _ in range(windows):
+        count = 0
+        start = time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            venv.step(actions[count % len(actions)])
+            count += 1
+        best = max(best, count * n / (time.perf_counter() - start))
+    return best
+
+
 def run_children_at_once(args: list[str], count: int, env: dict | None = None, what: str = "child") -> list[dict]:
     """Start ``count`` copies of the command ``args`` at once; the JSON each prints on its last line."""
     procs = [subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)

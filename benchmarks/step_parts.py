@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -25,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import finish, machine, print_table  # noqa: E402
+from common import best_seconds, finish, machine, print_table, vector_env_rate  # noqa: E402
 
 from continuum_gym.baselines.occlusion_kernels import make_scratch, occlusion_rates_kernel  # noqa: E402
 from continuum_gym.baselines.view_tracking import make_view_scratch, view_errors, view_rates_kernel  # noqa: E402
@@ -91,26 +90,13 @@ def view_part(part, Q, steps, dt, tasks, robot, prm, dv, frustum, scratch, overl
 
 
 def per_robot_us(fn, args: tuple, n: int, repeats: int) -> float:
-    fn(*args, 1)
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn(*args, 3)
-        best = min(best, (time.perf_counter() - start) / (3 * n) * 1e6)
-    return best
+    """Best microseconds per robot of ``fn(*args, reps=3)`` over ``repeats`` calls (after a compiling one)."""
+    return best_seconds(lambda: fn(*args, 3), number=1, repeat=repeats) / (3 * n) * 1e6
 
 
 def whole_step_us(venv, n: int, seconds: float) -> float:
-    zero = np.zeros((n,) + venv.single_action_space.shape, dtype=np.float32)
-    best = 0.0
-    for _ in range(3):
-        count = 0
-        start = time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            venv.step(zero)
-            count += 1
-        best = max(best, count * n / (time.perf_counter() - start))
-    return 1e6 / best
+    """Microseconds per robot of ``venv.step`` with zero actions."""
+    return 1e6 / vector_env_rate(venv, np.zeros((1, n) + venv.single_action_space.shape, dtype=np.float32), seconds)
 
 
 def main(argv=None) -> int:

@@ -167,8 +167,8 @@ def kernel(func: Callable | None = None, *, borrows: bool = False, **options):
     and the step kernels' per-row functions borrowing halved it (54 -> 28 us per robot-step, bit for
     bit: the arithmetic is the same code). A borrowing kernel cannot allocate (numba refuses to type
     ``np.empty`` there) and must not call a kernel that returns a new array (nothing would free it):
-    ``tests/robots/test_compiled.py`` steps every env with numba's allocation statistics on and
-    requires as many frees as allocations. A borrowing kernel that takes the registered plug-in slots
+    ``tests/envs/test_borrowing_kernels.py`` steps every step path with numba's allocation statistics on
+    and requires as many frees as allocations. A borrowing kernel that takes the registered plug-in slots
     (numba typed lists) is declared ``no_cpython_wrapper=True`` (numba's option): it is called only from
     other kernels, and a Python entry would unbox those lists, which needs reference counting.
     """
