@@ -32,6 +32,8 @@ from continuum_gym.robots.mbcr_kernels import (
 from continuum_gym.validation import as_finite, integer
 
 VOI_SAMPLES_PER_SEGMENT = 40
+# Angles (rad) closer than this are compared by atan2 itself when VOI's nu is sought.
+ANGLE_TIE = 1e-9
 
 
 @kernel(borrows=True)
@@ -77,7 +79,14 @@ def voi_kernel(points, gamma, cone, lens, dr):
     _, r_e, _ = cone_distance_slant_cs(ex, ey, ez, cb, sb)
     if r_e >= r_max:
         return 0.0, 0.0, r_e, r_max
-    nu = -1.0
+    # nu is the largest atan2(|e x p|, e . p) over the qualifying samples. The angles are ordered without
+    # atan2: for a, b in [0, pi], a > b exactly when sin(a - b) > 0, i.e. when n_a d_b - d_a n_b > 0. Only
+    # a near tie (|a - b| below ~1e-9 rad, far above atan2's last-bit error) is settled by atan2 itself, so
+    # nu is the same double as the maximum of every sample's atan2 (atan2 runs once, not per sample).
+    best = -1
+    best_n = 0.0
+    best_d = 0.0
+    best_angle = math.nan  # atan2 of the best sample once a near tie has needed it
     for i in range(entry, m):
         if dr[i, 0] <= 0.0 and dr[i, 1] > 0.0 and dr[i, 1] <= r_max:
             px = lens[i, 0]
@@ -86,9 +95,24 @@ def voi_kernel(points, gamma, cone, lens, dr):
             cx = ey * pz - ez * py
             cy = ez * px - ex * pz
             cz = ex * py - ey * px
-            angle = math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), ex * px + ey * py + ez * pz)
-            if angle > nu:
-                nu = angle
+            n_i = math.sqrt(cx * cx + cy * cy + cz * cz)
+            d_i = ex * px + ey * py + ez * pz
+            if best < 0:
+                best, best_n, best_d, best_angle = i, n_i, d_i, math.nan
+                continue
+            sine = n_i * best_d - d_i * best_n  # |v_i| |v_best| sin(angle_i - angle_best)
+            if sine * sine > ANGLE_TIE * ANGLE_TIE * (n_i * n_i + d_i * d_i) * (best_n * best_n + best_d * best_d):
+                if sine > 0.0:
+                    best, best_n, best_d, best_angle = i, n_i, d_i, math.nan
+                continue
+            if math.isnan(best_angle):
+                best_angle = math.atan2(best_n, best_d)
+            angle = math.atan2(n_i, d_i)
+            if angle > best_angle:
+                best, best_n, best_d, best_angle = i, n_i, d_i, angle
+    if best < 0:
+        return 0.0, 0.0, r_e, r_max
+    nu = math.atan2(best_n, best_d) if math.isnan(best_angle) else best_angle
     if nu < 0.0:
         return 0.0, 0.0, r_e, r_max
     nu = min(nu, 2.0 * beta)

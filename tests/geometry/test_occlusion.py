@@ -235,6 +235,52 @@ def test_voi_monotone_in_subtended_angle_and_entry_height():
     assert 0.0 <= min(by_angle + by_entry) and max(by_angle + by_entry) <= 1.0
 
 
+def _brute_force_nu(lens, dr):
+    """nu of paper-notes §1.3 item 13 by the definition: atan2 of every qualifying sample, then the maximum."""
+    m = len(dr)
+    entry = next(i for i in range(m) if dr[i, 0] <= 0.0 and dr[i, 1] > 0.0)
+    if entry > 0:
+        t = dr[entry - 1, 0] / (dr[entry - 1, 0] - dr[entry, 0])
+        e = [lens[entry - 1, a] + t * (lens[entry, a] - lens[entry - 1, a]) for a in range(3)]
+    else:
+        e = list(lens[0])
+    angles = []
+    for i in range(entry, m):
+        if dr[i, 0] <= 0.0 and dr[i, 1] > 0.0 and dr[i, 1] <= dr[m - 1, 1]:
+            px, py, pz = lens[i]
+            cx, cy, cz = e[1] * pz - e[2] * py, e[2] * px - e[0] * pz, e[0] * py - e[1] * px
+            angles.append(math.atan2(math.sqrt(cx * cx + cy * cy + cz * cz), e[0] * px + e[1] * py + e[2] * pz))
+    return max(angles)
+
+
+@pytest.mark.parametrize("gap", [0.0, 1e-15, 1e-12, 1e-10, 1e-9, 1e-8, 1e-3])
+def test_voi_nu_is_the_exact_maximum_of_every_samples_angle(gap):
+    """The kernel orders the samples' angles without atan2 and settles near ties (< 1e-9 rad) with it:
+    nu must still be the very double that the maximum over every sample's atan2 gives."""
+    rng = np.random.default_rng(int(gap * 1e15) % 1000)
+    beta = CONE.beta
+    for _ in range(40):
+        entry_angle = beta - 1e-4
+        top = rng.uniform(0.2, 1.9) * beta
+        # Samples at angles around the largest, some of them apart by only `gap` (rad), in shuffled order.
+        offsets = np.concatenate([[0.0, gap, -gap, 2 * gap], rng.uniform(-0.3, 0.0, 6)])
+        rng.shuffle(offsets)
+        path = [_lens_point(0.01, beta + 0.2), _lens_point(0.02, entry_angle)]
+        for offset in offsets:
+            # Off the entry's direction by `top + offset` (rad), inside the cone: rotate about the lens y axis
+            # toward -x, staying within the half-angle by a sideways azimuth when needed.
+            angle = entry_angle - (top + offset)
+            path.append(_lens_point(rng.uniform(0.025, 0.06), max(min(angle, beta - 1e-3), -beta + 1e-3)
+                                    if abs(angle) < beta else beta - 1e-3, 0.0 if abs(angle) < beta else np.pi))
+        path.append(_lens_point(0.07, 0.0))
+        world = _world_from_lens(np.asarray(path, dtype=float))
+        m = world.shape[0]
+        lens, dr = np.empty((m, 3)), np.empty((m, 2))
+        voi, nu, _, _ = voi_kernel(world, 0.0, ConeKernelArgs(CONE.d_o, CONE.alpha, beta, 0), lens, dr)
+        assert nu == min(_brute_force_nu(lens, dr), 2.0 * beta)
+        assert 0.0 < voi <= 1.0
+
+
 def test_voi_is_zero_when_the_entry_is_beyond_the_tip():
     beta = CONE.beta
     path = [_lens_point(0.08, beta + 0.1), _lens_point(0.08, beta - 0.1), _lens_point(0.05, beta + 0.3)]
