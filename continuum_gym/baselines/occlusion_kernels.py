@@ -99,11 +99,16 @@ def occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scr
     tip_kernel(q, robot, ws, scratch.p, scratch.R, scratch.J)
     tracking_twist(scratch.p, scratch.R, p_des, R_des, v_ff, prm.k_track, prm.v_max, prm.w_max, scratch.work33,
                    scratch.e_w, scratch.xi)
-    return resolve_rates(q, gamma, scratch.xi, dt, robot, prm, ws, scratch, qdot)
+    return resolve_rates_inline(q, gamma, scratch.xi, dt, robot, prm, ws, scratch, qdot)
 
 
-# Not inlined, unlike its helpers: inlined into the step and observe kernels it would save ~10 % of an
-# occlusion step (its entry's reference counts) but add ~20 s to the first compile.
+@kernel(borrows=True)
+def occlusion_rates(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scratch, qdot):
+    """``occlusion_rates_kernel`` as a call, for the batch entry points below (they allocate, so they count
+    references, and the borrowing evaluation must not be inlined into them)."""
+    return occlusion_rates_kernel(q, gamma, p_des, R_des, v_ff, dt, robot, prm, ws, scratch, qdot)
+
+
 @kernel(borrows=True)
 def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     """Eqs (22)-(24) for a desired twist ``xi`` (6,), with J and the tip in ``scratch`` and the frames in
@@ -111,6 +116,16 @@ def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
 
     Returns (gamma_dot, frozen_mask_bits, rate_scale); limit handling as ``baselines.occlusion`` says.
     """
+    return resolve_rates_inline(q, gamma, xi, dt, robot, prm, ws, scratch, qdot)
+
+
+# Inlined where the step's rows evaluate the controller (``occlusion_rates_kernel``): a call passes every
+# array of its bundles as flattened arguments (prm, robot, ws and scratch: ~30 arrays), which cost more than
+# the solve's own arithmetic; inlined, an OcclusionAvoidance step ran 14-22 % faster (paired, one thread).
+@kernel(inline="always")
+def resolve_rates_inline(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
+    """``resolve_rates`` inlined into the caller (a borrowing one: inlined into a kernel that counts
+    references, its array reads would be counted too)."""
     p, J, grad, A, B, mask = scratch.p, scratch.J, scratch.grad, scratch.A, scratch.B, scratch.mask
     dof = q.shape[0]
     if prm.use_gradient:
@@ -188,7 +203,7 @@ def rates_batch(Q, G, P_des, R_des, V_ff, dt, robot, prm, qdot, gamma_dot, froze
     ws = make_workspace(robot.lengths.shape[0])
     scratch = make_scratch(prm.segments.shape[0], Q.shape[1])
     for i in range(Q.shape[0]):
-        gamma_dot[i], frozen[i], scale[i] = occlusion_rates_kernel(
+        gamma_dot[i], frozen[i], scale[i] = occlusion_rates(
             Q[i], G[i], P_des[i], R_des[i], V_ff[i], dt, robot, prm, ws, scratch, qdot[i])
 
 
@@ -206,8 +221,8 @@ def rollout_batch(Q0, G0, P_des, R_des, V_ff, dt, robot, prm, q_traj, gamma_traj
         q_traj[i, 0] = q
         gamma_traj[i, 0] = gamma
         for t in range(n_steps):
-            gd, _, _ = occlusion_rates_kernel(q, gamma, P_des[i, t], R_des[i, t], V_ff[i, t], dt, robot, prm, ws,
-                                              scratch, qdot)
+            gd, _, _ = occlusion_rates(q, gamma, P_des[i, t], R_des[i, t], V_ff[i, t], dt, robot, prm, ws,
+                                       scratch, qdot)
             for k in range(dof):
                 q[k] = min(max(q[k] + qdot[k] * dt, prm.lower[k]), prm.upper[k])
             gamma = wrap_angle(gamma + gd * dt)

@@ -22,11 +22,13 @@ from continuum_gym.baselines.view_tracking import (
     integrate_view_step,
     make_view_scratch,
     view_errors,
+    view_rates_inline,
     view_rates_kernel,
 )
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.custom import row_reward, view_slot_rates
-from continuum_gym.geometry.overlap import make_overlap_work, overlap_ratio_in
+from continuum_gym.geometry.overlap import make_overlap_work
+from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
@@ -65,7 +67,7 @@ ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "d
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
 
-@kernel(borrows=True, no_cpython_wrapper=True)
+@kernel(borrows=True, no_cpython_wrapper=True, inline="always")
 def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
     """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
 
@@ -85,7 +87,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
         for k in range(6):
             base_cmd[i, k] = qdot[k]
     elif env.has_base:
-        eps_p, eps_r, _ = view_rates_kernel(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
+        eps_p, eps_r, _ = view_rates_inline(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
         for k in range(6):
             base_cmd[i, k] = qdot[k]
     else:
@@ -94,7 +96,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
             base_cmd[i, k] = 0.0
     p_ct = scratch.p_ct
     e_w = scratch.e_w
-    ratio = overlap_ratio_in(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near, frustum.far,
+    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near, frustum.far,
                              work.overlap)
     metrics = out.metrics
     metrics[i, METRIC_OR] = ratio

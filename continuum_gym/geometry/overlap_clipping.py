@@ -30,7 +30,7 @@ from continuum_gym.geometry.frustum import FACE_VERTICES
 from continuum_gym.robots.compiled import kernel
 
 __all__ = ["OverlapWork", "make_overlap_work", "local_geometry", "overlap_pair", "overlap_ratio_nb", "overlap_ratio_in",
-           "COPLANAR_NORMAL_TOL", "COPLANAR_OFFSET_TOL"]
+           "overlap_ratio_inline", "COPLANAR_NORMAL_TOL", "COPLANAR_OFFSET_TOL"]
 
 #: Work arrays of one overlap-ratio evaluation: the frustum's camera-frame vertices (8, 3) and half-spaces
 #: (6, 4), then the clipping scratch of ``overlap_pair`` (see ``make_overlap_work``).
@@ -287,6 +287,12 @@ def overlap_ratio_in(p_a, R_a, p_b, R_b, tan_half, near, far, work):
 
     Positions in m; for use inside other numba kernels that evaluate many pairs.
     """
+    return overlap_ratio_inline(p_a, R_a, p_b, R_b, tan_half, near, far, work)
+
+
+@kernel(inline="always")
+def overlap_ratio_inline(p_a, R_a, p_b, R_b, tan_half, near, far, work):
+    """``overlap_ratio_in`` inlined into a borrowing caller (a call would pass every array of ``work``)."""
     local_geometry(tan_half, near, far, work.lv, work.lh)
     return overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, work.lv, work.lh, work.vb, work.hb, work.cut,
                          work.poly, work.dist)
