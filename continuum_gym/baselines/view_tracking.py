@@ -75,16 +75,6 @@ def make_view_scratch():
 @kernel(borrows=True)
 def view_errors(q, p_tgt, R_tgt, robot, scratch):
     """FK + Jacobian into scratch; returns (eps_p (m), eps_R (rad)); e_p in twist[:3], e_w in e_w."""
-    return view_errors_inline(q, p_tgt, R_tgt, robot, scratch)
-
-
-# The ``*_inline`` bodies are inlined into the env's borrowing row kernels; the named kernels are the same
-# code as a call, for kernels that count references (an inlined body's array reads would be counted
-# there). A call passes every array of its bundles as flattened arguments (ViewScratch alone holds ~30),
-# which costs more than FK or a 6 x 6 solve.
-@kernel(inline="always")
-def view_errors_inline(q, p_tgt, R_tgt, robot, scratch):
-    """``view_errors`` inlined into the caller."""
     p_ct, e_w, twist = scratch.p_ct, scratch.e_w, scratch.twist
     endoscope_kinematics(q, robot, scratch.ws, scratch.p_cam, scratch.R_ct, p_ct, scratch.J, True)
     for a in range(3):
@@ -120,14 +110,8 @@ def view_rates_kernel(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
 
     RMRC: undamped pinv of the full 6x6 J. DR: paper-notes §2.5 loop with freezing. Both in mm/rad.
     """
-    return view_rates_inline(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot)
-
-
-@kernel(inline="always")
-def view_rates_inline(q, p_tgt, R_tgt, dt, robot, prm, scratch, qdot):
-    """``view_rates_kernel`` inlined into the caller."""
     J, e_w, twist, Jmm, mask = scratch.J, scratch.e_w, scratch.twist, scratch.Jmm, scratch.mask
-    eps_p, eps_r = view_errors_inline(q, p_tgt, R_tgt, robot, scratch)
+    eps_p, eps_r = view_errors(q, p_tgt, R_tgt, robot, scratch)
     # Capped twist (paper-notes §2.3 item 5) from SI errors and limits, then expressed in mm/s and rad/s.
     v_gain = min(prm.v_lim, eps_p / dt) / eps_p if eps_p > 0.0 else 0.0
     w_gain = min(prm.w_lim, eps_r / dt) / eps_r if eps_r > 0.0 else 0.0

@@ -22,7 +22,6 @@ from continuum_gym.baselines.view_tracking import (
     integrate_view_step,
     make_view_scratch,
     view_errors,
-    view_rates_inline,
     view_rates_kernel,
 )
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
@@ -62,7 +61,7 @@ ViewStepParams = namedtuple("ViewStepParams", ["control_dt", "has_base", "residu
                                                "target_scale", "action_scale", "rate_limit", "weights"])
 #: What a step writes: the cached baseline command, observations, metrics, reward terms, rewards, flags.
 ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
-#: Per-thread scratch of ``view_step_row``.
+#: Per-thread scratch of a ViewTracking row's step (``view_step_rows``).
 ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "dv_rate", "p_dv", "R_dv", "p_tgt",
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
@@ -87,7 +86,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
         for k in range(6):
             base_cmd[i, k] = qdot[k]
     elif env.has_base:
-        eps_p, eps_r, _ = view_rates_inline(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
+        eps_p, eps_r, _ = view_rates_kernel(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
         for k in range(6):
             base_cmd[i, k] = qdot[k]
     else:
@@ -159,13 +158,17 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
         view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
 
 
-# Inlined into view_step_rows, its only caller (so typed once, as before): no call per row that counts
-# references to every array of the bundles it passes, and no library of its own to optimise and load.
-# Native N=64 182 k -> 198 k steps/s (one thread, paired), single step 10.1 -> 9.65 us, first compile
-# -1.8 s. The same for the occlusion row measured even (its substeps dominate), so it is left as it was.
+# The row's parts and its observation are inlined into view_step_rows, their only caller: a call passes
+# every array of the bundles as flattened arguments (native N=64 182 k -> 198 k steps/s when the row was
+# inlined; with the observation and the overlap ratio inlined too, +18-58 % more; paired, one thread). The
+# observation is inlined at one place, for resets and steps alike, and DR IK stays a call: inlined as
+# well it ran no faster and made the first compile 44 -> 73 s.
 @kernel(inline="always")
-def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work):
-    """One control step (one IK step of dt = control_dt, the paper's 0.01 s) for row i."""
+def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out, work):
+    """Row i's control step up to its observation: one IK step of dt = control_dt (the paper's 0.01 s).
+
+    Returns (|a|^2, clamped joint bits, rate scale) for ``finish_view_row``.
+    """
     cmd, q_new = work.cmd, work.q_new
     q = state.q[i]
     base_cmd = out.base_cmd
@@ -194,7 +197,12 @@ def view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom
     for k in range(6):
         q[k] = q_new[k]
     state.steps[i] += 1
-    view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
+    return action_sq, clamped, scale
+
+
+@kernel(inline="always")
+def finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, clamped, scale):
+    """Row i's reward terms, reward and flags after its observation."""
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
@@ -226,7 +234,13 @@ def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, 
     reference counts (``kernel(borrows=True)``)."""
     for i in range(start, stop):
         mode = active[i]
-        if mode == OBSERVE_ONLY:
-            view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
-        elif mode != 0:
-            view_step_row(i, state, actions, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work)
+        if mode == 0:
+            continue
+        step = mode != OBSERVE_ONLY
+        action_sq, clamped, scale = 0.0, 0, 1.0
+        if step:
+            action_sq, clamped, scale = advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out,
+                                                         work)
+        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
+        if step:
+            finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, clamped, scale)
