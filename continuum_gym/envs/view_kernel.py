@@ -95,8 +95,8 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
             base_cmd[i, k] = 0.0
     p_ct = scratch.p_ct
     e_w = scratch.e_w
-    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near, frustum.far,
-                             work.overlap)
+    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near,
+                                 frustum.far, work.overlap)
     metrics = out.metrics
     metrics[i, METRIC_OR] = ratio
     metrics[i, METRIC_POSITION_ERROR] = eps_p

@@ -83,7 +83,7 @@ def voi_kernel(points, gamma, cone, lens, dr):
     # atan2: for a, b in [0, pi], a > b exactly when sin(a - b) > 0, i.e. when n_a d_b - d_a n_b > 0. Only
     # a near tie (|a - b| below ~1e-9 rad, far above atan2's last-bit error) is settled by atan2 itself, so
     # nu is the same double as the maximum of every sample's atan2 (atan2 runs once, not per sample).
-    best = -1
+    found = False
     best_n = 0.0
     best_d = 0.0
     best_angle = math.nan  # atan2 of the best sample once a near tie has needed it
@@ -97,24 +97,23 @@ def voi_kernel(points, gamma, cone, lens, dr):
             cz = ex * py - ey * px
             n_i = math.sqrt(cx * cx + cy * cy + cz * cz)
             d_i = ex * px + ey * py + ez * pz
-            if best < 0:
-                best, best_n, best_d, best_angle = i, n_i, d_i, math.nan
+            if not found:
+                found, best_n, best_d = True, n_i, d_i
                 continue
             sine = n_i * best_d - d_i * best_n  # |v_i| |v_best| sin(angle_i - angle_best)
             if sine * sine > ANGLE_TIE * ANGLE_TIE * (n_i * n_i + d_i * d_i) * (best_n * best_n + best_d * best_d):
                 if sine > 0.0:
-                    best, best_n, best_d, best_angle = i, n_i, d_i, math.nan
+                    best_n, best_d, best_angle = n_i, d_i, math.nan
                 continue
             if math.isnan(best_angle):
                 best_angle = math.atan2(best_n, best_d)
             angle = math.atan2(n_i, d_i)
             if angle > best_angle:
-                best, best_n, best_d, best_angle = i, n_i, d_i, angle
-    if best < 0:
+                best_n, best_d, best_angle = n_i, d_i, angle
+    if not found:
         return 0.0, 0.0, r_e, r_max
+    # n >= 0, so atan2 is in [0, pi]: no sign to check
     nu = math.atan2(best_n, best_d) if math.isnan(best_angle) else best_angle
-    if nu < 0.0:
-        return 0.0, 0.0, r_e, r_max
     nu = min(nu, 2.0 * beta)
     sweep = math.sin(nu) / (2.0 * math.sin(beta) * math.cos(nu - beta))
     voi = sweep * sweep * (1.0 - (r_e / r_max) ** 3)

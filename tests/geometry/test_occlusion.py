@@ -267,11 +267,9 @@ def test_voi_nu_is_the_exact_maximum_of_every_samples_angle(gap):
         rng.shuffle(offsets)
         path = [_lens_point(0.01, beta + 0.2), _lens_point(0.02, entry_angle)]
         for offset in offsets:
-            # Off the entry's direction by `top + offset` (rad), inside the cone: rotate about the lens y axis
-            # toward -x, staying within the half-angle by a sideways azimuth when needed.
-            angle = entry_angle - (top + offset)
-            path.append(_lens_point(rng.uniform(0.025, 0.06), max(min(angle, beta - 1e-3), -beta + 1e-3)
-                                    if abs(angle) < beta else beta - 1e-3, 0.0 if abs(angle) < beta else np.pi))
+            # In the entry's plane, `top + offset` (rad) off its direction, kept 1 mrad inside the cone.
+            angle = np.clip(entry_angle - (top + offset), -beta + 1e-3, beta - 1e-3)
+            path.append(_lens_point(rng.uniform(0.025, 0.06), angle))
         path.append(_lens_point(0.07, 0.0))
         world = _world_from_lens(np.asarray(path, dtype=float))
         m = world.shape[0]
