@@ -63,13 +63,17 @@ def cholesky_solve_sized(A, B, n, m):
             for k in range(j):
                 s -= A[i, k] * A[j, k]
             A[i, j] = s / ljj
-    for col in range(m):
-        for i in range(n):
+    # The right-hand sides go through each row together: each column's substitution is a chain of
+    # dependent divisions, and side by side the columns' chains overlap. Every column sees the same
+    # operations in the same order as alone, so the solution is the same to the bit.
+    for i in range(n):
+        for col in range(m):
             s = B[i, col]
             for k in range(i):
                 s -= A[i, k] * B[k, col]
             B[i, col] = s / A[i, i]
-        for i in range(n - 1, -1, -1):
+    for i in range(n - 1, -1, -1):
+        for col in range(m):
             s = B[i, col]
             for k in range(i + 1, n):
                 s -= A[k, i] * B[k, col]

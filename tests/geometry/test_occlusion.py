@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
+import numba
 import numpy as np
 import pytest
 
 from continuum_gym.geometry.force_field import (
     ForceField,
+    exact_square,
     potential_gradient,
+    pow_as_libm,
     repulsive_force,
 )
 from continuum_gym.geometry.lens_cone import (
@@ -134,6 +138,43 @@ def test_force_magnitude_and_support():
     assert np.all(np.diff(mags) > 0)
     far = np.linalg.norm(repulsive_force(vertex + 2 * field.r_star * side, 0.0))
     assert far == pytest.approx(field.f_star / 4)
+
+
+@numba.njit
+def _pow_as_libm_all(xs, y, y_is_two):
+    out = np.empty_like(xs)
+    for i in range(xs.shape[0]):
+        out[i] = pow_as_libm(xs[i], y, y_is_two)
+    return out
+
+
+def _libm_pow(x: float, y: float) -> float:
+    try:
+        return math.pow(x, y)  # CPython calls the C library's pow
+    except OverflowError:
+        return math.inf
+
+
+def test_exact_square_is_exact():
+    rng = np.random.default_rng(5)
+    xs = np.concatenate([rng.uniform(0.0, 2.0, 500), np.exp(rng.uniform(-300.0, 300.0, 500))])
+    for x in xs:
+        hi, lo = exact_square(x)
+        assert hi == x * x
+        assert Fraction(hi) + Fraction(lo) == Fraction(float(x)) ** 2
+
+
+@pytest.mark.parametrize("y", [2.0, 1.0, 2.5, 3.0])
+def test_pow_as_libm_is_libm_pow_to_the_bit(y):
+    # The force's two powers take their base from (0, 1] (1 - d/d0) and from r*/r (~0.1 to 1e8).
+    rng = np.random.default_rng(6)
+    xs = np.concatenate([rng.uniform(0.0, 1.0, 400_000), rng.uniform(1.0, 100.0, 200_000),
+                         np.exp(rng.uniform(-320.0, 320.0, 200_000)),
+                         [0.0, 5e-324, 1e-140, 1e140, 1e160, 1.0, 2.0, 0.5, np.inf]])
+    got = _pow_as_libm_all(xs, y, y == 2.0)
+    expected = np.array([_libm_pow(x, y) for x in xs])
+    mismatched = np.flatnonzero(got != expected)
+    assert mismatched.size == 0, f"{mismatched.size} bases differ from libm's pow, e.g. {xs[mismatched[:3]]}"
 
 
 @pytest.mark.parametrize("cone", [CONE, PHYSICAL])
