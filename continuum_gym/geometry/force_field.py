@@ -59,9 +59,10 @@ class ForceField:
         positive(self.f_star, "f_star", "N")
         positive(self.p, "p", "-")
         positive(self.q, "q", "-")
-        object.__setattr__(self, "_kernel_args", FieldKernelArgs(
-            float(self.d0), float(self.r_star), float(self.f_star), float(self.p), float(self.q), float(self.q) == 2.0,
-            2.0 * float(self.p) == 2.0))
+        p, q = float(self.p), float(self.q)
+        # The flags are the kernel's own exponents (q and 2p) compared with 2, in the same double arithmetic.
+        object.__setattr__(self, "_kernel_args", FieldKernelArgs(float(self.d0), float(self.r_star),
+                                                                 float(self.f_star), p, q, q == 2.0, 2.0 * p == 2.0))
 
     def kernel_args(self) -> FieldKernelArgs:
         """(d0, r_star, f_star, p, q, q == 2, 2p == 2): the bundle the force kernels read."""
