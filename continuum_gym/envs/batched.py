@@ -8,13 +8,13 @@ all of them with one compiled call.
 from __future__ import annotations
 
 import math
-import threading
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
+from continuum_gym.envs.row_claims import SERIAL, run_claimed
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import integer
 
@@ -60,8 +60,6 @@ def check_actions(actions, shape, name: str = "action") -> tuple[np.ndarray, np.
 #: Batches at least this large are stepped on all cores (rows are independent, results identical); a core
 #: whose rows are cheap sets a larger ``parallel_min_rows``.
 PARALLEL_MIN_ROWS = 32
-PARALLEL_BALANCE_ROWS = 256
-_EXECUTORS: dict = {}
 
 
 def step_threads(num_threads=None) -> int:
@@ -90,51 +88,9 @@ def step_threads(num_threads=None) -> int:
     return integer(num_threads, "num_threads", low=1, high=numba.config.NUMBA_NUM_THREADS)
 
 
-def parallel_chunks(num_envs: int, threads: int, min_rows: int = PARALLEL_MIN_ROWS) -> int:
-    """Number of row chunks for the threaded kernels (1 = serial: fewer than ``min_rows`` rows or one thread)."""
-    if num_envs < min_rows or threads < 2:
-        return 1
-    # Each chunk's call unboxes the kernel bundles holding the GIL (~10 us): one chunk per thread for
-    # small batches; for large ones more chunks than threads even out rows that end early.
-    return threads if num_envs < PARALLEL_BALANCE_ROWS else 4 * threads
-
-
-def run_in_chunks(kernel, args: tuple, num_rows: int, n_chunks: int, threads: int = 1) -> None:
-    """``kernel(*args, start, stop)`` over ``n_chunks`` contiguous row ranges covering [0, num_rows).
-
-    The step kernels release the GIL, so the chunks run on ``threads`` threads: the caller's own and a
-    pool of ``threads - 1``, each taking the next chunk until none is left. The caller computes rather
-    than waits: handing every chunk to the pool cost two thread hand-offs per step, which at N = 64
-    made two threads slower than one for ViewTracking (274 k against 370 k steps/s).
-    """
-    if n_chunks <= 1:
-        kernel(*args, 0, num_rows)
-        return
-    helpers = threads - 1
-    executor = _EXECUTORS.get(helpers)
-    if executor is None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        executor = _EXECUTORS[helpers] = ThreadPoolExecutor(max_workers=helpers,
-                                                            thread_name_prefix="continuum-gym-step")
-    bounds = [chunk * num_rows // n_chunks for chunk in range(n_chunks + 1)]
-    chunks = iter(zip(bounds[:-1], bounds[1:]))
-    lock = threading.Lock()
-
-    def take_chunks() -> None:
-        while True:
-            with lock:
-                chunk = next(chunks, None)
-            if chunk is None:
-                return
-            kernel(*args, *chunk)
-
-    futures = [executor.submit(take_chunks) for _ in range(min(helpers, n_chunks - 1))]
-    try:
-        take_chunks()
-    finally:
-        for future in futures:
-            future.result()
+def row_threads(num_envs: int, threads: int, min_rows: int = PARALLEL_MIN_ROWS) -> int:
+    """Threads a batch of ``num_envs`` rows is stepped on: ``threads``, or 1 below ``min_rows`` rows."""
+    return 1 if num_envs < min_rows else threads
 
 
 _FLOAT64 = np.dtype(np.float64)
@@ -160,19 +116,20 @@ class KernelCall:
         self.kernel = kernel
         self.entry = None
 
-    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, n_chunks: int,
-                 threads: int = 1) -> None:
-        if not (_is_kernel_array(actions, _FLOAT64, 2) and _is_kernel_array(active, _UINT8, 1)):
-            run_in_chunks(self.kernel, args, num_rows, n_chunks, threads)
-            return
-        if self.entry is None:
-            signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, 0, 0))
-            self.kernel.compile(signature)
-            self.entry = self.kernel.overloads[signature].entry_point
-        if n_chunks <= 1:  # the single env's and small batches' path: no further Python call
-            self.entry(*args, 0, num_rows)
+    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, threads: int = 1,
+                 block: int = 1) -> None:
+        """Step rows [0, num_rows) on ``threads`` threads, which claim ``block`` rows at a time."""
+        kernel = self.kernel
+        if _is_kernel_array(actions, _FLOAT64, 2) and _is_kernel_array(active, _UINT8, 1):
+            if self.entry is None:
+                signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, SERIAL, 0, 0))
+                self.kernel.compile(signature)
+                self.entry = self.kernel.overloads[signature].entry_point
+            kernel = self.entry
+        if threads <= 1:  # the single env's and small batches' path: no further Python call
+            kernel(*args, SERIAL, 0, num_rows)
         else:
-            run_in_chunks(self.entry, args, num_rows, n_chunks, threads)
+            run_claimed(kernel, args, num_rows, threads, block)
 
 
 class BatchedCore:
@@ -189,6 +146,7 @@ class BatchedCore:
     _observe_mask: np.ndarray | None = None  # observe_rows' ``active`` (N,) uint8, zero between calls
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     parallel_min_rows = PARALLEL_MIN_ROWS  #: batches of fewer rows are stepped on the calling thread alone
+    claim_block = 1  #: rows a thread claims at a time (``envs/row_claims``): larger where rows are cheap
     builtin_reward_names: tuple = ()
     info_fields: tuple = ()
     metric_columns: dict = {}  # info name -> column of ``metrics``, for numpy reward terms

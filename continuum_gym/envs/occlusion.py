@@ -9,7 +9,7 @@ from gymnasium.vector import VectorEnv
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.envs.batched import (
     BatchedCore,
-    parallel_chunks,
+    row_threads,
     step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
@@ -132,7 +132,7 @@ class OcclusionCore(BatchedCore):
         self.limit = np.zeros(n, dtype=np.int64)
         self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
         self.num_threads = step_threads(num_threads)
-        self.n_chunks = parallel_chunks(n, self.num_threads, self.parallel_min_rows)
+        self.row_threads = row_threads(n, self.num_threads, self.parallel_min_rows)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         guard = self.visibility_guard
@@ -161,8 +161,8 @@ class OcclusionCore(BatchedCore):
         self.observe_rows(rows)
 
     def step(self, actions: np.ndarray, active: np.ndarray):
-        self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.n_chunks,
-                        self.num_threads)
+        self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.row_threads,
+                        self.claim_block)
         self._add_numpy_terms(actions, active)
         # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
         return self.rewards, self.flags[:, FLAG_TERMINATED].astype(bool), self.flags[:, FLAG_TRUNCATED].astype(bool)

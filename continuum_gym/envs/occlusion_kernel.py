@@ -33,6 +33,7 @@ from continuum_gym.envs.common_kernels import (
     desired_rotation,
 )
 from continuum_gym.envs.custom import occlusion_slot_rates, row_reward
+from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.compiled import kernel
@@ -361,21 +362,26 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
 
 
 @kernel(nogil=True)
-def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, start, stop):
+def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, claims, start,
+                         stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
     ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).
 
     One kernel for both, so a process loads the observation's compiled code once, inside the step's.
-    Releases the GIL, so ``BatchedCore`` steps row chunks on several threads; rows are independent and
-    each is computed by the same row function, so chunked results equal serial ones bit for bit.
+    Releases the GIL, so ``BatchedCore`` steps rows on several threads, each claiming blocks of rows from
+    ``claims`` (``envs/row_claims``; ``SERIAL``: all rows on this thread); rows are independent and each is
+    computed by the same row function, so threaded results equal serial ones bit for bit.
     """
     work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
-    for i in range(start, stop):
-        mode = active[i]
-        if mode == OBSERVE_ONLY:
-            occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
-        elif mode != 0:
-            occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work)
+    first, last = first_rows(claims, start, stop)
+    while first < last:
+        for i in range(first, last):
+            mode = active[i]
+            if mode == OBSERVE_ONLY:
+                occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+            elif mode != 0:
+                occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work)
+        first, last = next_rows(claims, start, stop, first, last)
 
 
 __all__ = ["occlusion_step_batch", "REWARD_TERMS",

@@ -26,6 +26,7 @@ from continuum_gym.baselines.view_tracking import (
 )
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.custom import row_reward, view_slot_rates
+from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.overlap import make_overlap_work
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
@@ -220,11 +221,16 @@ def finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, c
 
 
 @kernel(nogil=True)
-def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, start, stop):
+def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, claims,
+                    start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
-    marked ``OBSERVE_ONLY`` (releases the GIL; see occlusion_kernel)."""
-    view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out,
-                   make_view_step_work(), start, stop)
+    marked ``OBSERVE_ONLY`` (releases the GIL; rows claimed from ``claims``: see occlusion_kernel)."""
+    work = make_view_step_work()
+    first, last = first_rows(claims, start, stop)
+    while first < last:
+        view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work,
+                       first, last)
+        first, last = next_rows(claims, start, stop, first, last)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)

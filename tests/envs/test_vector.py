@@ -217,7 +217,7 @@ def test_num_threads_is_checked_and_changes_no_result():
             for _ in range(5):
                 obs, *_ = venv.step(rng.uniform(-1, 1, venv.action_space.shape).astype(np.float32))
             runs.append(obs)
-        assert venv.unwrapped.core.n_chunks == (threads if threads > 1 else 1)
+        assert venv.unwrapped.core.row_threads == threads
         np.testing.assert_array_equal(runs[0], runs[1])
     # torch is loaded in this test process: the default leaves the cores to the learner.
     assert vector(VIEW, n=64).unwrapped.core.num_threads == 1

@@ -1,0 +1,155 @@
+"""Rows of a batch step shared out among threads as they go: each thread claims the next block of rows.
+
+A fixed split (one contiguous chunk per thread) waits for the slowest chunk, and on a virtual machine a
+pool thread that slept between steps starts 30-75 us after it is handed its chunk, and the caller, had
+it slept on the chunk's future, would wake as late again. Claimed rows even that out: a thread that
+starts late claims fewer rows. The step kernels claim blocks with an atomic add on a small int64 array
+of the call (``claims``), and the caller waits for the last rows in compiled code, for at most the time
+of one block unless the other thread was descheduled (then it falls back to blocking on the futures).
+Which thread steps a row changes no result: rows are independent and each is computed by the same row
+function, bit for bit.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import numpy as np
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from continuum_gym.robots.compiled import kernel
+
+#: ``claims`` layout: [rows claimed so far, rows finished, rows per claim]
+CLAIMED, FINISHED, BLOCK = 0, 1, 2
+#: The serial call's ``claims``: no shared counter, the kernel steps [start, stop) in one pass.
+# Writeable although never written: a read-only array is another numba type, and the step kernels would
+# compile twice.
+SERIAL = np.zeros(0, dtype=np.int64)
+#: Polls of the finished count (with a pause instruction each, ~10-40 ns) before the caller checks its
+#: helpers' futures from Python; after ``WAIT_POLL_ROUNDS`` such rounds it blocks on them.
+WAIT_SPINS = 20_000
+WAIT_POLL_ROUNDS = 50
+
+
+def _item_pointer(context, builder, array_type, array, index):
+    return cgutils.get_item_pointer(context, builder, array_type, context.make_array(array_type)(context, builder,
+                                                                                                array), [index])
+
+
+@intrinsic
+def atomic_add(typingctx, array, index, value):
+    """``array[index] += value`` as one atomic read-modify-write (sequentially consistent); returns the old value."""
+    if not (isinstance(array, types.Array) and array.dtype == types.int64 and array.ndim == 1):
+        return None
+
+    def codegen(context, builder, signature, args):
+        index_value = context.cast(builder, args[1], signature.args[1], types.intp)
+        value = context.cast(builder, args[2], signature.args[2], types.int64)
+        pointer = _item_pointer(context, builder, signature.args[0], args[0], index_value)
+        return builder.atomic_rmw("add", pointer, value, "seq_cst")
+
+    return types.int64(array, index, value), codegen
+
+
+@intrinsic
+def atomic_load(typingctx, array, index):
+    """``array[index]`` read atomically (sequentially consistent), so a write of another thread is seen."""
+    if not (isinstance(array, types.Array) and array.dtype == types.int64 and array.ndim == 1):
+        return None
+
+    def codegen(context, builder, signature, args):
+        index_value = context.cast(builder, args[1], signature.args[1], types.intp)
+        pointer = _item_pointer(context, builder, signature.args[0], args[0], index_value)
+        return builder.load_atomic(pointer, "seq_cst", 8)
+
+    return types.int64(array, index), codegen
+
+
+@intrinsic
+def spin_pause(typingctx):
+    """x86's ``pause`` (a no-op elsewhere): a busy wait that leaves the core's pipeline to its sibling."""
+
+    def codegen(context, builder, signature, args):
+        import llvmlite.ir as ir
+        import platform
+
+        if platform.machine().lower() in ("x86_64", "amd64", "i386", "i686"):
+            pause = builder.module.declare_intrinsic("llvm.x86.sse2.pause", fnty=ir.FunctionType(ir.VoidType(), []))
+            builder.call(pause, [])
+        return context.get_dummy_value()
+
+    return types.none(), codegen
+
+
+@kernel(inline="always", borrows=True)
+def first_rows(claims, start, stop):
+    """The first rows [first, last) the calling thread steps: all of [start, stop) on a serial call."""
+    if claims.shape[0] == 0:
+        return start, stop
+    first = start + atomic_add(claims, CLAIMED, claims[BLOCK])
+    return first, min(first + claims[BLOCK], stop)
+
+
+@kernel(inline="always", borrows=True)
+def next_rows(claims, start, stop, first, last):
+    """Count [first, last) as finished and claim the next block; an empty range when none is left."""
+    if claims.shape[0] == 0:
+        return stop, stop
+    atomic_add(claims, FINISHED, last - first)
+    first = start + atomic_add(claims, CLAIMED, claims[BLOCK])
+    return first, min(first + claims[BLOCK], stop)
+
+
+@kernel(nogil=True, borrows=True)
+def wait_rows(claims, rows, spins):
+    """Busy-wait (without the GIL) until ``rows`` rows are finished, for at most ``spins`` polls."""
+    for _ in range(spins):
+        if atomic_load(claims, FINISHED) >= rows:
+            return True
+        spin_pause()
+    return atomic_load(claims, FINISHED) >= rows
+
+
+_EXECUTORS: dict = {}
+
+
+def _executor(helpers: int) -> concurrent.futures.ThreadPoolExecutor:
+    executor = _EXECUTORS.get(helpers)
+    if executor is None:
+        executor = _EXECUTORS[helpers] = concurrent.futures.ThreadPoolExecutor(
+            max_workers=helpers, thread_name_prefix="continuum-gym-step")
+    return executor
+
+
+def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: int) -> None:
+    """``kernel_entry(*args, claims, 0, num_rows)`` on the calling thread and ``threads - 1`` pool threads.
+
+    The kernel claims ``block`` rows at a time from ``claims`` (a fresh array per call, so a pool thread
+    that starts after the call returned finds every row claimed and does nothing) until all are claimed;
+    this returns when every row is finished and re-raises a pool thread's exception.
+    """
+    claims = np.array([0, 0, block], dtype=np.int64)
+    helpers = threads - 1
+    executor = _executor(helpers)
+    futures = [executor.submit(kernel_entry, *args, claims, 0, num_rows) for _ in range(helpers)]
+    try:
+        kernel_entry(*args, claims, 0, num_rows)
+    except BaseException:
+        # Every claimed row is being stepped: return only when no pool thread writes the arrays any more.
+        concurrent.futures.wait(futures)
+        raise
+    for _ in range(WAIT_POLL_ROUNDS):
+        if wait_rows(claims, num_rows, WAIT_SPINS):
+            return
+        for future in futures:
+            if future.done():
+                future.result()  # a pool thread's exception (its claimed rows will never finish)
+    # The pool thread was descheduled (the cores are shared): stop burning a core for it.
+    for future in futures:
+        future.result()
+    if claims[FINISHED] < num_rows:  # pragma: no cover - every thread returned without finishing its rows
+        raise RuntimeError(f"batch step finished {claims[FINISHED]} of {num_rows} rows")
+
+
+__all__ = ["SERIAL", "first_rows", "next_rows", "wait_rows", "run_claimed", "atomic_add", "atomic_load"]
