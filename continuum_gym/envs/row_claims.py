@@ -13,6 +13,7 @@ function, bit for bit.
 from __future__ import annotations
 
 import concurrent.futures
+import time
 import numpy as np
 from numba import types
 from numba.core import cgutils
@@ -26,10 +27,12 @@ CLAIMED, FINISHED, BLOCK = 0, 1, 2
 # Writeable although never written: a read-only array is another numba type, and the step kernels would
 # compile twice.
 SERIAL = np.zeros(0, dtype=np.int64)
-#: Polls of the finished count (with a pause instruction each, ~10-40 ns) before the caller checks its
-#: helpers' futures from Python; after ``WAIT_POLL_ROUNDS`` such rounds it blocks on them.
-WAIT_SPINS = 20_000
-WAIT_POLL_ROUNDS = 50
+#: Polls of the finished count between the caller's checks of its helpers' futures (a pause instruction
+#: each: ~31 ns on the AVX-512 EPYC, so ~60 us a round).
+WAIT_SPINS = 2_000
+#: Longest busy wait, in s: a block takes 3-30 us, so a longer wait means a descheduled thread (the cores
+#: are shared), and the caller then blocks on the futures instead of taking a core from it.
+WAIT_SPIN_SECONDS = 1e-3
 
 
 def _item_pointer(context, builder, array_type, array, index):
@@ -139,13 +142,15 @@ def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: i
         # Every claimed row is being stepped: return only when no pool thread writes the arrays any more.
         concurrent.futures.wait(futures)
         raise
-    for _ in range(WAIT_POLL_ROUNDS):
-        if wait_rows(claims, num_rows, WAIT_SPINS):
-            return
+    deadline = time.perf_counter() + WAIT_SPIN_SECONDS
+    while not wait_rows(claims, num_rows, WAIT_SPINS):
         for future in futures:
             if future.done():
                 future.result()  # a pool thread's exception (its claimed rows will never finish)
-    # The pool thread was descheduled (the cores are shared): stop burning a core for it.
+        if time.perf_counter() > deadline:
+            break
+    else:
+        return
     for future in futures:
         future.result()
     if claims[FINISHED] < num_rows:  # pragma: no cover - every thread returned without finishing its rows
