@@ -6,6 +6,7 @@ it slept on the chunk's future, would wake as late again. Claimed rows even that
 starts late claims fewer rows. The step kernels claim blocks with an atomic add on a small int64 array
 of the call (``claims``), and the caller waits for the last rows in compiled code, for at most the time
 of one block unless the other thread was descheduled (then it falls back to blocking on the futures).
+The caller never depends on a pool thread to finish: if none comes, it steps every row itself.
 Which thread steps a row changes no result: rows are independent and each is computed by the same row
 function, bit for bit.
 """
@@ -13,7 +14,9 @@ function, bit for bit.
 from __future__ import annotations
 
 import concurrent.futures
+import os
 import time
+
 import numpy as np
 from numba import types
 from numba.core import cgutils
@@ -114,6 +117,12 @@ def wait_rows(claims, rows, spins):
     return atomic_load(claims, FINISHED) >= rows
 
 
+@kernel(nogil=True, borrows=True)
+def close_claims(claims, rows):
+    """Claim every row that is left, for nobody: threads that come to the call afterwards step nothing."""
+    atomic_add(claims, CLAIMED, rows)
+
+
 _EXECUTORS: dict = {}
 
 
@@ -123,6 +132,12 @@ def _executor(helpers: int) -> concurrent.futures.ThreadPoolExecutor:
         executor = _EXECUTORS[helpers] = concurrent.futures.ThreadPoolExecutor(
             max_workers=helpers, thread_name_prefix="continuum-gym-step")
     return executor
+
+
+# A forked child has none of its parent's pool threads, but its copy of the pool believes it has them
+# and would queue every call's work for nobody (the caller steps all rows itself, so nothing hangs, but
+# the queue grows by one call per step): the child starts its own pool.
+os.register_at_fork(after_in_child=_EXECUTORS.clear)
 
 
 def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: int) -> None:
@@ -139,7 +154,8 @@ def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: i
     try:
         kernel_entry(*args, claims, 0, num_rows)
     except BaseException:
-        # Every claimed row is being stepped: return only when no pool thread writes the arrays any more.
+        close_claims(claims, num_rows)  # a pool thread that comes now steps nothing
+        # Rows claimed before are being stepped: return only when no pool thread writes the arrays any more.
         concurrent.futures.wait(futures)
         raise
     deadline = time.perf_counter() + WAIT_SPIN_SECONDS

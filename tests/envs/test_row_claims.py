@@ -95,3 +95,27 @@ def test_an_error_in_any_thread_reaches_the_caller(bad_row):
         with pytest.raises(ValueError, match="row failed"):
             run_claimed(_fail_at, (bad_row, counts), 1_000, _threads(), 1)
     assert counts.max() <= 1
+
+
+def _step_in_child(queue) -> None:
+    counts = np.zeros((2_000, 3), dtype=np.int64)
+    run_claimed(_count_rows, (counts, 200, np.zeros(1, dtype=np.int64)), 2_000, _threads(), 1)
+    queue.put((int(counts[:, 0].sum()), len(np.unique(counts[:, 1]))))
+
+
+def test_a_forked_child_steps_without_its_parents_pool_threads():
+    """The parent's pool threads do not exist in a forked child (multiprocessing's fork workers): the
+    caller must not wait for them (the previous release hung there), and the child starts a pool of its
+    own rather than queueing every call's work for threads that are not there."""
+    import multiprocessing
+
+    counts = np.zeros((2_000, 3), dtype=np.int64)
+    run_claimed(_count_rows, (counts, 200, np.zeros(1, dtype=np.int64)), 2_000, _threads(), 1)  # pool started
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_step_in_child, args=(queue,))
+    child.start()
+    child.join(timeout=120)
+    assert child.exitcode == 0, "the forked child hung or failed"
+    rows, threads_that_stepped = queue.get(timeout=5)
+    assert rows == 2_000 and threads_that_stepped >= 2
