@@ -153,20 +153,20 @@ def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: i
     futures = [executor.submit(kernel_entry, *args, claims, 0, num_rows) for _ in range(helpers)]
     try:
         kernel_entry(*args, claims, 0, num_rows)
+        deadline = time.perf_counter() + WAIT_SPIN_SECONDS
+        while not wait_rows(claims, num_rows, WAIT_SPINS):
+            for future in futures:
+                if future.done():
+                    future.result()  # a pool thread's exception (its claimed rows will never finish)
+            if time.perf_counter() > deadline:
+                break
+        else:
+            return
     except BaseException:
         close_claims(claims, num_rows)  # a pool thread that comes now steps nothing
         # Rows claimed before are being stepped: return only when no pool thread writes the arrays any more.
         concurrent.futures.wait(futures)
         raise
-    deadline = time.perf_counter() + WAIT_SPIN_SECONDS
-    while not wait_rows(claims, num_rows, WAIT_SPINS):
-        for future in futures:
-            if future.done():
-                future.result()  # a pool thread's exception (its claimed rows will never finish)
-        if time.perf_counter() > deadline:
-            break
-    else:
-        return
     for future in futures:
         future.result()
     if claims[FINISHED] < num_rows:  # pragma: no cover - every thread returned without finishing its rows
