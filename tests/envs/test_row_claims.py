@@ -51,7 +51,9 @@ def _threads() -> int:
 def test_every_row_is_stepped_once_and_both_threads_claim(rows, block):
     counts = np.zeros((rows, 3), dtype=np.int64)
     thread_ids = np.zeros(1, dtype=np.int64)
-    spin = 200 if rows >= 64 else 0
+    # ~5 us a row on the large batches (~50 ms on two threads): long enough for the pool thread to come
+    # even when the machine is busy with other tests (a thread may wait a few ms for a core)
+    spin = 5_000 if rows >= 20_000 else 200 if rows >= 64 else 0
     run_claimed(_count_rows, (counts, spin, thread_ids), rows, _threads(), block)
     # Returned only once every row is finished: no row missing or stepped twice (a lost atomic update
     # would hand a block to both threads), and nothing written after the return.
@@ -98,8 +100,8 @@ def test_an_error_in_any_thread_reaches_the_caller(bad_row):
 
 
 def _step_in_child(queue) -> None:
-    counts = np.zeros((2_000, 3), dtype=np.int64)
-    run_claimed(_count_rows, (counts, 200, np.zeros(1, dtype=np.int64)), 2_000, _threads(), 1)
+    counts = np.zeros((20_000, 3), dtype=np.int64)  # ~50 ms: time for the child's pool thread to come
+    run_claimed(_count_rows, (counts, 5_000, np.zeros(1, dtype=np.int64)), 20_000, _threads(), 1)
     queue.put((int(counts[:, 0].sum()), len(np.unique(counts[:, 1]))))
 
 
@@ -118,4 +120,4 @@ def test_a_forked_child_steps_without_its_parents_pool_threads():
     child.join(timeout=120)
     assert child.exitcode == 0, "the forked child hung or failed"
     rows, threads_that_stepped = queue.get(timeout=5)
-    assert rows == 2_000 and threads_that_stepped >= 2
+    assert rows == 20_000 and threads_that_stepped >= 2
