@@ -147,6 +147,9 @@ class BatchedCore:
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     parallel_min_rows = PARALLEL_MIN_ROWS  #: batches of fewer rows are stepped on the calling thread alone
     claim_block = 1  #: rows a thread claims at a time (``envs/row_claims``): larger where rows are cheap
+    terminated_flag: int  #: the column of ``flags`` its step kernel sets when a row terminates
+    truncated_flag: int  #: ... and when a row is truncated
+    row_threads: int  #: threads a step runs on (``row_threads``), set by the constructor
     builtin_reward_names: tuple = ()
     info_fields: tuple = ()
     metric_columns: dict = {}  # info name -> column of ``metrics``, for numpy reward terms
@@ -184,13 +187,18 @@ class BatchedCore:
     def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray):  # pragma: no cover - interface
         raise NotImplementedError
 
-    def step(self, actions: np.ndarray, active: np.ndarray):  # pragma: no cover - interface
+    def step(self, actions: np.ndarray, active: np.ndarray):
         """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
 
         Returns (rewards, terminated, truncated) arrays and fills ``self.obs``. The value 2
         (``OBSERVE_ONLY``) is reserved for ``observe_rows``: such a row is observed, not stepped.
         """
-        raise NotImplementedError
+        self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.row_threads,
+                        self.claim_block)
+        self._add_numpy_terms(actions, active)
+        # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
+        return (self.rewards, self.flags[:, self.terminated_flag].astype(bool),
+                self.flags[:, self.truncated_flag].astype(bool))
 
     def _setup_rewards(self) -> None:
         """Reward names and slots: the built-in terms, then the registered compiled, then numpy terms."""

@@ -85,6 +85,7 @@ class OcclusionCore(BatchedCore):
     config_class = OcclusionConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(occlusion_step_batch)
+    terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
     supports_pixel_occlusion = True
     info_fields = INFO_FIELDS
     metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
@@ -159,13 +160,6 @@ class OcclusionCore(BatchedCore):
         self._install_tasks(rows, fresh)
         self.gamma[rows] = fresh.start_gamma
         self.observe_rows(rows)
-
-    def step(self, actions: np.ndarray, active: np.ndarray):
-        self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.row_threads,
-                        self.claim_block)
-        self._add_numpy_terms(actions, active)
-        # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
-        return self.rewards, self.flags[:, FLAG_TERMINATED].astype(bool), self.flags[:, FLAG_TRUNCATED].astype(bool)
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``OCCLUSION_SPEC.episode_metrics``)."""

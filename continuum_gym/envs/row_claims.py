@@ -103,8 +103,7 @@ def next_rows(claims, start, stop, first, last):
     if claims.shape[0] == 0:
         return stop, stop
     atomic_add(claims, FINISHED, last - first)
-    first = start + atomic_add(claims, CLAIMED, claims[BLOCK])
-    return first, min(first + claims[BLOCK], stop)
+    return first_rows(claims, start, stop)
 
 
 @kernel(nogil=True, borrows=True)

@@ -72,6 +72,7 @@ class ViewTrackingCore(BatchedCore):
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(view_step_batch)
+    terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
     # A row costs ~3 us: at N = 64 waking a second thread cost more than it saved (2 threads 256 k against
     # 1 thread 294 k steps/s); from N = 128 it pays (410 k against 338 k). benchmarks/batch.py
     parallel_min_rows = 128
@@ -142,13 +143,6 @@ class ViewTrackingCore(BatchedCore):
         fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)
         self.observe_rows(rows)
-
-    def step(self, actions: np.ndarray, active: np.ndarray):
-        self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.row_threads,
-                        self.claim_block)
-        self._add_numpy_terms(actions, active)
-        # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
-        return self.rewards, self.flags[:, FLAG_TERMINATED].astype(bool), self.flags[:, FLAG_TRUNCATED].astype(bool)
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``VIEW_SPEC.episode_metrics``)."""
