@@ -3,7 +3,7 @@
 ``import continuum_gym`` registers the ``ContinuumGym/`` environment ids with Gymnasium.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from continuum_gym.envs.registration import ENV_IDS, register_envs  # noqa: E402
 
