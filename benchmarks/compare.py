@@ -4,7 +4,8 @@
                                  [--repeats 3] [--quick] [--all] [--json PATH] [--old-tree PATH]
                                  [--idle-below CORES] [--idle-wait SECONDS] [--retries N]
 
-``--compare`` defaults to ``d737a5f``, the last revision before the inside refactor (issue 14, stage 0).
+``--compare`` defaults to ``revisions.DEFAULT_REV``, the last revision before the inside refactor (issue 14,
+stage 0): the refactored code is judged against the code it replaced.
 The old revision is checked out with ``git worktree add --detach`` into a temporary directory. The new
 tree is the working tree as it is at the start, snapshotted into a second worktree (HEAD plus the
 uncommitted and untracked files copied in), so edits made meanwhile by others, or a mere save that

@@ -3,10 +3,10 @@
     python benchmarks/memory.py [--json PATH] [--num-envs 4096] [--quick]
 
 Why clean processes: the RSS a batch adds depends on what the allocator kept from earlier work in the
-same process. Measured on this project's VM, one 4096-robot OcclusionAvoidance env built four times in
-one process added 20.6, 5.8, 2.8 and 2.0 MiB; built first in a fresh process, it added 20.5 MiB in
-two runs out of two. So every figure here comes from its own child process, which first builds and
-steps a 64-robot env of the same id (loading the compiled kernels the big one shares), then measures.
+same process. The same 4096-robot env built again and again in one process adds less each time (the
+allocator reuses what the previous one freed), while built first in a fresh process it adds the same
+every time. So every figure here comes from its own child process, which first builds and steps a
+64-robot env of the same id (loading the compiled kernels the big one shares), then measures.
 
 JSON keys (MiB):
 - ``memory.native4096.<id>``: RSS added (each reading after ``malloc_trim``) by ``make_vec(num_envs=4096)`` + ``reset`` + one ``step``;
@@ -40,9 +40,9 @@ UNITS = {"memory.*": "MiB", "held.*": "MiB", "rss.*": "MiB", "peak_rss_mib": "Mi
 def trim_heap() -> None:
     """Give the allocator's free pages back to the system (glibc), so that RSS counts what is held.
 
-    Without it the figure depends on when glibc trims by itself: d737a5f's kernels made ~170 k small
-    allocations per 4096-robot step, whose frees let glibc return 0.6 MiB at that step; kernels that
-    allocate nothing leave the same free pages mapped.
+    Without it the figure depends on when glibc trims by itself: kernels that allocate per step free
+    enough small blocks for glibc to return pages at that step, while kernels that allocate nothing leave
+    the same free pages mapped. Trimming before every reading makes the two kinds of code comparable.
     """
     try:
         ctypes.CDLL("libc.so.6").malloc_trim(0)

@@ -87,7 +87,7 @@ def snapshot_working_tree(trees: list[Tree]) -> Tree:
 
     Timing /work/main in place is at the mercy of whoever edits it meanwhile: numba keys its cache on
     each source file's modification time, so even a save that changes nothing recompiles inside a
-    timed run (seen: a 52 s run and +170 MiB peak RSS), and a real edit would time other code.
+    timed run (its seconds and its memory then count as the code's), and a real edit would time other code.
     """
     head = git("rev-parse", "HEAD")
     tree = add_worktree("new", head, trees)

@@ -1,4 +1,4 @@
-"""Golden files: what users rely on, recorded before the inside refactor and compared bit for bit after it.
+"""Golden files: what users rely on, recorded once and compared bit for bit, so no change inside goes unnoticed.
 
 Three records (``tests/data/golden/``):
 
@@ -15,9 +15,10 @@ says why they changed); ``tests/test_golden.py`` recomputes and compares. The in
 Bit for bit holds on one *numerics platform*: the last bits of a float result also depend on the CPU's
 vector instructions (numpy's SIMD loops, OpenBLAS's LAPACK kernels behind the resolved-rate baseline's
 pseudo-inverse, torch's matmul kernels behind the shipped policies) and on those libraries' versions.
-The same code on an AVX2-only AMD EPYC differs from the reference set by up to 2e-13 in one env case
-and, through the closed loops of the policies, in the evaluation's last printed digit; an AVX-512 EPYC
-(znver5) whose OpenBLAS chose its Haswell kernels gives exactly the AVX2 machine's results. So a platform
+The same code on a CPU with other vector instructions (AVX2 against AVX-512) differs from the reference
+set by up to 2e-13 in one env case and, through the closed loops of the policies, in the evaluation's
+last printed digit; and a CPU with AVX-512, like the reference's, gives exactly the AVX2 results
+when its OpenBLAS picks its AVX2 (Haswell) kernels. So a platform
 can have its own set, ``platforms/<key>/`` (``python tests/golden.py --platform``, recorded from the
 revision that last wrote the reference set, never from the code under test), compared bit for bit.
 A platform's set holds only the records that differ from the reference set; the others are read from it.
@@ -202,8 +203,8 @@ def numerics_platform() -> dict:
     numba compiles for, the kernel set OpenBLAS picked at run time (behind numpy's and scipy's LAPACK), libm,
     torch's kernel level and the versions of the numerical libraries.
 
-    Two AVX-512 AMD EPYCs with the same vector features (numpy's list) and library versions gave other last
-    bits (one, LLVM's znver5 with OpenBLAS's Haswell kernels, those of the AVX2 machine), so the CPU model and
+    Two CPUs with the same vector features (numpy's list) and library versions can still give other last
+    bits (LLVM compiles for the CPU model, and OpenBLAS picks its kernel set per CPU), so the CPU model and
     the BLAS kernels are part of it.
     """
     import platform

@@ -1,5 +1,5 @@
 """Nothing users rely on changes: env steps, the reproduction and the evaluation equal their golden files
-bit for bit (recorded before the inside refactor; see ``tests/golden.py`` for the numerics platforms)."""
+bit for bit (``tests/golden.py`` says when they are recorded, and what a numerics platform is)."""
 
 from __future__ import annotations
 

@@ -120,8 +120,8 @@ def resolve_rates(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
 
 
 # Inlined where the step's rows evaluate the controller (``occlusion_rates_kernel``): a call passes every
-# array of its bundles as flattened arguments (prm, robot, ws and scratch: ~30 arrays), which cost more than
-# the solve's own arithmetic; inlined, an OcclusionAvoidance step ran 14-22 % faster (paired, one thread).
+# array of its bundles as flattened arguments (prm, robot, ws and scratch: ~30 arrays), which costs more than
+# the solve's own arithmetic, and it would be paid at every substep of every row.
 @kernel(inline="always")
 def resolve_rates_inline(q, gamma, xi, dt, robot, prm, ws, scratch, qdot):
     """``resolve_rates`` inlined into the caller (a borrowing one: inlined into a kernel that counts

@@ -146,7 +146,7 @@ def row_reader(fields: Sequence[InfoField], core) -> Callable:
     """A function ``(core, row) -> info dict`` written out for ``fields``, made once per field list.
 
     The single env builds ``info`` every step (and the vector env its batch version, ``info_batch``);
-    a loop over the fields that resolves each reader cost more than the values themselves (15 fields:
+    a loop over the fields that resolves each reader costs more than the values themselves (15 fields:
     ~8 us against ~2 us for the dict written out, the way ``dataclasses`` writes ``__init__``), and for
     small batches more than the kernel. Each source array (or its row) is read once. Readers with
     ``expression`` / ``batch_expression`` say how their value is read from it; others are called on the

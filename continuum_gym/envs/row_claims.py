@@ -31,7 +31,7 @@ CLAIMED, FINISHED, BLOCK = 0, 1, 2
 # compile twice.
 SERIAL = np.zeros(0, dtype=np.int64)
 #: Polls of the finished count between the caller's checks of its helpers' futures (a pause instruction
-#: each: ~31 ns on the AVX-512 EPYC, so ~60 us a round).
+#: each, tens of ns on current x86 cores, so a round lasts tens of microseconds).
 WAIT_SPINS = 2_000
 #: Longest busy wait, in s: a block takes 3-30 us, so a longer wait means a descheduled thread (the cores
 #: are shared), and the caller then blocks on the futures instead of taking a core from it.

@@ -82,8 +82,8 @@ _KNOT_FIELDS = frozenset(name for name in _FIELD_NAMES if name.startswith("knot_
 
 
 def empty_batch(n: int, dof: int, dim: int, knots: int = 0) -> TaskBatch:
-    # Knot arrays start empty: only recorded trajectories use them (they grow on install), and at one
-    # knot each they were 14 floats per row, 0.45 MiB of a 4096-robot batch that no row read.
+    # Knot arrays start empty: only recorded trajectories use them (they grow on install); at one knot
+    # each they would be 14 floats per row, 0.45 MiB of a 4096-robot batch that no row reads.
     return TaskBatch(np.zeros((n, dof)), np.zeros(n), np.zeros((n, dim)), np.zeros((n, N_TERMS, dim)),
                      np.zeros((n, N_TERMS)), np.zeros((n, N_TERMS)), np.tile(np.eye(3), (n, 1, 1)),
                      np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
@@ -95,7 +95,7 @@ def row_indices(rows, source_rows: int) -> tuple:
     """(target, source) indices that copy ``source_rows`` rows into ``rows``.
 
     A single env resets one row: plain indexing copies it at a third of the cost of an index array
-    (the reset's 15 task fields and 6 state arrays took ~10 us through index arrays).
+    (the reset's 15 task fields and 6 state arrays take ~10 us through index arrays).
     """
     if source_rows == 1 and isinstance(rows, np.ndarray) and rows.shape == (1,):
         return int(rows[0]), 0

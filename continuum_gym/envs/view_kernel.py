@@ -160,10 +160,9 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
 
 
 # The row's parts and its observation are inlined into view_step_rows, their only caller: a call passes
-# every array of the bundles as flattened arguments (native N=64 182 k -> 198 k steps/s when the row was
-# inlined; with the observation and the overlap ratio inlined too, +18-58 % more; paired, one thread). The
-# observation is inlined at one place, for resets and steps alike, and DR IK stays a call: inlined as
-# well it ran no faster and made the first compile 44 -> 73 s.
+# every array of the bundles as flattened arguments, a sizeable cost against a row of ~3 us. The observation
+# is inlined at one place, for resets and steps alike, and DR IK stays a call: inlined as well it makes the
+# step no faster and the first compile much longer.
 @kernel(inline="always")
 def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out, work):
     """Row i's control step up to its observation: one IK step of dt = control_dt (the paper's 0.01 s).

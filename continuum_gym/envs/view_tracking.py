@@ -73,8 +73,8 @@ class ViewTrackingCore(BatchedCore):
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(view_step_batch)
     terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
-    # A row costs ~3 us: at N = 64 waking a second thread cost more than it saved (2 threads 256 k against
-    # 1 thread 294 k steps/s); from N = 128 it pays (410 k against 338 k). benchmarks/batch.py
+    # A row costs ~3 us: at N = 64 waking a second thread costs more than it saves (benchmarks/batch.py times
+    # one thread against all cores); from N = 128 it pays.
     parallel_min_rows = 128
     # Threads claim 8 rows (~25 us) at a time: one claim per row would add an atomic add on a cache line
     # both cores write, and a call of the row loop, to every ~3 us row.

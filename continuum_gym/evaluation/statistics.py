@@ -33,7 +33,7 @@ def summarize(scores, reps: int = DEFAULT_REPS, seed: int = 0) -> dict:
         low = high = point
     else:
         # rliable 1.2 draws its resampling indices from numpy's *global* generator (update_indices calls
-        # np.random.choice) and ignores random_state, so a CI depended on whatever ran before. Seed the
+        # np.random.choice) and ignores random_state, so a CI would depend on whatever ran before. Seed the
         # global generator for the draw and give the caller's state back afterwards.
         caller_state = np.random.get_state()
         np.random.seed(seed)

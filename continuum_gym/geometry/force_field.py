@@ -113,7 +113,8 @@ def exact_square(x):
 def pow_as_libm(x, y, y_is_two):
     """``x ** y`` (x >= 0) to the bit as libm's pow returns it, nine calls in ten spared for y = 2.
 
-    The paper's field has q = 2 and 2p = 2, and pow was 14 % of an OcclusionAvoidance step. A correctly
+    The paper's field has q = 2 and 2p = 2, and pow, called twice per point subject to potential at every
+    substep, is a large share of an OcclusionAvoidance step. A correctly
     rounded x * x differs from pow(x, 2.0) in about 1 case in 1,200 (glibc's pow is not correctly rounded),
     and every last-bit change grows along a closed-loop trajectory, so x * x alone would change results.
     Here the exact square hi + lo (Dekker's product: exact for 1e-140 < x < 1e140) decides: when lo is
@@ -123,7 +124,7 @@ def pow_as_libm(x, y, y_is_two):
 
     ``y_is_two`` must be ``y == 2.0``, computed by the caller outside the compiled code: tested here, the
     compiler would know y == 2 wherever pow is called for y = 2, turn pow(x, 2.0) into x * x, and change the
-    bits (it did, after unswitching a loop on the test).
+    bits (LLVM does so after unswitching a loop on the test).
     """
     if y_is_two and 1e-140 < x < 1e140:
         hi, lo = exact_square(x)

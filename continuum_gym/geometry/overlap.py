@@ -21,7 +21,7 @@ import threading
 import numpy as np
 
 from continuum_gym.geometry.frustum import Frustum
-from continuum_gym.geometry.overlap_clipping import (  # noqa: F401  (used below; also imported from here, as before the split)
+from continuum_gym.geometry.overlap_clipping import (  # noqa: F401  (used below; also importable from this module)
     COPLANAR_NORMAL_TOL,
     COPLANAR_OFFSET_TOL,
     OverlapWork,
@@ -100,7 +100,7 @@ def _compiled(dispatcher, signature: str):
     So unusual inputs (views, read-only arrays) never trigger new compilations. On first use, not at
     import (as a signature in the decorator would): an OcclusionAvoidance user never pays its ~4.6 s of
     compiling on an empty cache. The callers keep the result in a module global (a function call per
-    pair was 5 % of a single pair's 2.2 us).
+    pair would be ~5 % of a single pair's ~2 us).
     """
     with _COMPILE_LOCK:  # two threads' first calls: one compiles, the other finds it compiled
         if not dispatcher.signatures:
@@ -138,7 +138,7 @@ def _overlap_batch(p_a, R_a, p_b, R_b, tan_half, near, far, out):
         if code != 0:
             return code + 3, k
     # The work's arrays as locals: a bundle's array read inside the loop costs an atomic reference count
-    # per read (~7 % of this loop when they were read there).
+    # per read (~7 % of this loop if they are read there).
     lv, lh, vb, hb, cut, poly, dist = make_overlap_work()
     local_geometry(tan_half, near, far, lv, lh)  # once: the frustum is the same for every pair
     for k in range(n):
@@ -241,7 +241,8 @@ def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndar
 
 
 def __getattr__(name: str):
-    # The references moved to overlap_reference.py; their old import path keeps working.
+    # The references live in overlap_reference.py (scipy, slow) and load only when asked for here, where the
+    # module docstring lists them.
     if name in ("overlap_ratio_reference", "overlap_ratio_monte_carlo", "REFERENCE_MIN_RADIUS"):
         from continuum_gym.geometry import overlap_reference
 

@@ -275,7 +275,7 @@ def overlap_ratio_nb(p_a, R_a, p_b, R_b, tan_half, near, far):
     For use inside other numba kernels; Python callers should use :func:`overlap_ratio`.
     """
     # The work's arrays as locals, not a call of overlap_ratio_in with the bundle: that extra call's
-    # reference counts made a single pair ~0.5 us slower.
+    # reference counts would make a single pair ~0.5 us slower.
     lv, lh, vb, hb, cut, poly, dist = make_overlap_work()
     local_geometry(tan_half, near, far, lv, lh)
     return overlap_pair(p_a, R_a, p_b, R_b, tan_half, near, far, lv, lh, vb, hb, cut, poly, dist)

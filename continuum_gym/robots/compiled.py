@@ -18,8 +18,8 @@ results are bit for bit those of a JIT compile), for the signatures the envs act
 
 ``continuum-gym precompile --portable`` builds the set for LLVM's generic x86-64 CPU instead of this
 machine's, so it can be shipped to other machines (e.g. inside a wheel or a container image); it loads
-on any CPU of the same architecture. The kernels are scalar code, and on this project's AVX-512 machine
-the generic build stepped as fast (0.98-1.02x) to the same bits (README, "First use").
+on any CPU of the same architecture. The kernels are scalar code, so the generic build gives up little or
+no speed against a native one, and computes the same bits.
 
 ``CONTINUUM_GYM_PRECOMPILED=0`` ignores the set (measuring a JIT cold start, debugging a kernel).
 """
@@ -163,9 +163,9 @@ def kernel(func: Callable | None = None, *, borrows: bool = False, **options):
     ``borrows=True`` compiles the kernel without numba's reference counting (numba's ``_nrt=False``):
     it only borrows the arrays it is passed, for the duration of the call. A kernel that calls another
     (not inlined) one otherwise keeps an atomic incref / decref of every array it reads from its
-    bundles, because the call may raise; perf put those atomics at 43 % of an OcclusionAvoidance step,
-    and the step kernels' per-row functions borrowing halved it (54 -> 28 us per robot-step, bit for
-    bit: the arithmetic is the same code). A borrowing kernel cannot allocate (numba refuses to type
+    bundles, because the call may raise. In a step kernel those atomics cost nearly as much as the
+    arithmetic around them, so the step kernels' per-row functions borrow (the same bits: the arithmetic
+    is the same code). A borrowing kernel cannot allocate (numba refuses to type
     ``np.empty`` there) and must not call a kernel that returns a new array (nothing would free it):
     ``tests/envs/test_borrowing_kernels.py`` steps every step path with numba's allocation statistics on
     and requires as many frees as allocations. A borrowing kernel that takes the registered plug-in slots

@@ -24,7 +24,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from continuum_gym.robots.endoscope_kernels import (  # noqa: F401  (the kernels' names here too, as before the split)
+from continuum_gym.robots.endoscope_kernels import (  # noqa: F401  (the kernels' names are importable from here too)
     DOF,
     UNUSED_JACOBIAN,
     EndoscopeKernelArgs,

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
-from continuum_gym.robots.mbcr_kernels import (  # noqa: F401  (the kernels' names here too, as before the split)
+from continuum_gym.robots.mbcr_kernels import (  # noqa: F401  (the kernels' names are importable from here too)
     MBCRKernelArgs,
     MBCRWorkspace,
     all_finite,

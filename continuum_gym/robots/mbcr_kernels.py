@@ -66,7 +66,7 @@ def frames(q, robot, ws):
 
 # Reference counts: a compiled function that calls another (not inlined) one keeps an atomic
 # incref / decref of every array it was passed, bundles included, because the call may raise; those
-# were a quarter of an occlusion step. So the kernels called per substep are leaves, their helpers
+# would be a large share of an occlusion step. So the kernels called per substep are leaves, their helpers
 # inlined ("always"), and they pass the workspace's arrays and row indices rather than row views.
 @kernel(inline="always")
 def fill_frames(q, robot, ws):
@@ -112,9 +112,10 @@ def fill_frames(q, robot, ws):
 def rotate_columns(R_base, j, jv, jw, V, W, row):
     """V[row] = R_j jv, W[row] = R_j jw for one segment's (3, 2) twist columns, the theta column negated
     (q holds theta = pi/2 - bend: its column is minus the bend column)."""
-    # The negation is done in registers: negated in place (jv[a, 0] = -jv[a, 0]), the compiler flipped one
-    # byte of each double in memory and the 8-byte reload just after could not be forwarded from that
-    # store, the hottest instruction of the step in perf. R * (-x) is -(R * x) exactly: the same bits.
+    # The negation is done in registers: negated in place (jv[a, 0] = -jv[a, 0]), the compiler flips one
+    # byte of each double in memory, and the 8-byte reload just after cannot be forwarded from that store
+    # (a store-forwarding stall, which perf shows as the hottest instruction of the step). R * (-x) is -(R * x)
+    # exactly: the same bits.
     for c in range(2):
         v0 = 0.0
         v1 = 0.0

@@ -107,7 +107,7 @@ def _step_in_child(queue) -> None:
 
 def test_a_forked_child_steps_without_its_parents_pool_threads():
     """The parent's pool threads do not exist in a forked child (multiprocessing's fork workers): the
-    caller must not wait for them (the previous release hung there), and the child starts a pool of its
+    caller must not wait for them (they never come, so it would hang), and the child starts a pool of its
     own rather than queueing every call's work for threads that are not there."""
     import multiprocessing
 

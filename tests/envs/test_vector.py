@@ -228,7 +228,7 @@ def test_num_threads_is_checked_and_changes_no_result():
 
 def test_stepping_a_batch_leaves_the_process_openmp_thread_count_alone():
     """A threaded batch step must not start numba's OpenMP layer, which would set the process's OpenMP
-    thread count: a torch imported afterwards then ran 2 threads although OMP_NUM_THREADS=1."""
+    thread count: a torch imported afterwards would then run 2 threads although OMP_NUM_THREADS=1."""
     import os
     import subprocess
     import sys

@@ -47,8 +47,9 @@ def single_threaded_blas():
     """Run the block with one OpenBLAS thread (restored afterwards).
 
     The searches make hundreds of thousands of tiny BLAS calls (L-BFGS-B, SVDs of 6x7 matrices); a
-    threaded OpenBLAS spends milliseconds per call synchronising its threads, which made the coverage
-    optimum 4x slower. Without OpenBLAS (or off Linux) this does nothing.
+    threaded OpenBLAS spends milliseconds per call synchronising its threads, more than the call's own
+    work, so the coverage optimum would take several times as long. Without OpenBLAS (or off Linux)
+    this does nothing.
     """
     controls = _blas_controls()
     previous = [getter() for getter, _ in controls]
