@@ -220,11 +220,10 @@ def learner_threads() -> dict:
     One torch thread, whatever the cores: a trainer alternates env steps and gradient steps, never
     both at once, on small networks (two layers of 64-256 units, batches of 64-256), and ``--parallel``
     and ``sweep`` run one process per run, each of which then has a core of its own. A second thread
-    buys a single run little or nothing (benchmarks/training.py: SAC 103 against 90 gradient steps/s,
-    PPO 10,200 against 12,100 env steps/s). The vector env steps on the calling thread (its default
-    when torch is loaded). numba's own threading layer is left unstarted: started (as
-    ``numba.set_num_threads`` does) its OpenMP pool cost two SAC runs side by side a third of their
-    speed (61 / 62 against 119 / 92 gradient steps/s).
+    buys a single run little or nothing (benchmarks/training.py times one thread against two). The
+    vector env steps on the calling thread (its default when torch is loaded). numba's own threading
+    layer is left unstarted: started (as ``numba.set_num_threads`` does), its OpenMP pool competes for
+    the cores the other runs need, and two runs side by side lose about a third of their speed.
     """
     import os
 

@@ -109,7 +109,7 @@ class KernelCall:
     Resolving the types of the step's named bundles costs ~9 us per call (more than ViewTracking's
     arithmetic for one robot). The bundles keep their types for the life of a core, so the compiled
     entry point for them is looked up once; a call whose per-step arrays (actions (N, k) float64,
-    active (N,) uint8) have another type, layout or flag goes through the dispatcher as before.
+    active (N,) uint8) have another type, layout or flag goes through numba's dispatcher.
     """
 
     def __init__(self, kernel) -> None:
@@ -249,7 +249,7 @@ class BatchedCore:
 
         The step kernel does it for rows marked ``OBSERVE_ONLY`` (it reads no action for them): one
         compiled kernel holds both, so a process loads the observation's code once (an observe kernel of
-        its own had added 7.0 MiB of RSS to OcclusionAvoidance and 2 s to its first compile).
+        its own would compile and hold that code a second time: more RSS and a longer first compile).
         """
         from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 
