@@ -209,6 +209,37 @@ class Scene:
             rgb[seg < 0] = CAVITY
         return rgb
 
+    def set_external_camera(self, target=None, distance=None, azimuth=None, elevation=None, fov=None) -> None:
+        """Move the external camera; the values given replace those of ``external_camera`` (the rest stay).
+
+        Args:
+            target: (3,) point the camera looks at, in {w} (m).
+            distance: distance from the target (m), in (0, 1.5].
+            azimuth: angle about z_w from +x_w (deg).
+            elevation: angle above the target's horizontal plane (deg), in (-90, 90).
+            fov: vertical field of view (deg), in (0, 180).
+        """
+        from continuum_gym.validation import as_finite, number
+
+        self._check_open()
+        ext = dict(self.external_camera)
+        if target is not None:
+            point = as_finite(target, (3,), "target")
+            if point.shape != (3,):
+                raise ValueError(f"target must be one point of shape (3,) (m); got shape {point.shape}")
+            ext["target"] = tuple(float(x) for x in point)
+        if distance is not None:
+            ext["distance"] = number(distance, "distance", low=0.0, high=1.5, low_open=True, unit="m")
+        if azimuth is not None:
+            ext["azimuth"] = number(azimuth, "azimuth", unit="deg")
+        if elevation is not None:
+            ext["elevation"] = number(elevation, "elevation", low=-90.0, high=90.0, low_open=True, high_open=True,
+                                      unit="deg")
+        if fov is not None:
+            ext["fov"] = number(fov, "fov", low=0.0, high=180.0, low_open=True, high_open=True, unit="deg")
+        self._external = external_frame(ext["target"], ext["distance"], ext["azimuth"], ext["elevation"])
+        self.external_camera = ext
+
     def _robot_mask(self, seg):
         seg = np.where(seg >= 0, seg & 0xFFFFFF, -1)
         seg = np.clip(seg + 1, 0, len(self._lut) - 1)
