@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup setup-test precompile demo test test-fast bench reproduce docs clean
+.PHONY: setup setup-test precompile demo test test-fast bench reproduce figures docs clean
 
 # The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
@@ -39,6 +39,10 @@ demo: setup
 
 reproduce: setup
 	$(BIN)/continuum-gym reproduce --out results/reproduce --json results/reproduce/reproduce.json
+
+# The pictures of the README and the environment pages (docs/img/), drawn by `continuum-gym render`.
+figures: setup
+	$(BIN)/python scripts/render_docs_images.py
 
 test: setup-test
 	$(BIN)/python -m pytest -q -n 2
