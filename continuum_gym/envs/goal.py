@@ -5,11 +5,13 @@ environments (same dynamics, tasks, residual action, keyword arguments) with a `
 ``{"observation", "achieved_goal", "desired_goal"}`` and a reward that is a function of the goals,
 ``compute_reward(achieved_goal, desired_goal, info)``, vectorised over any leading batch shape.
 
-* OcclusionAvoidanceGoal: the goal is a tip pose ``[p (m, 3), rotation vector (rad, 3)]``: achieved
-  the tip's, desired the task's at the current time. ``reward_type="dense"``: minus (position error
-  in mm + orientation error in rad + VOI of the step); ``"sparse"``: 0 when within ``tolerance_m``
-  (default 1 mm) and ``tolerance_rad`` (0.05 rad), else -1. VOI is a property of the state, read from
-  ``info["voi"]``, so relabelled transitions keep it.
+* OcclusionAvoidanceGoal: the goal is a tip pose and an occlusion ``[p (m, 3), rotation vector (rad, 3),
+  VOI]``: achieved the tip's pose and the VOI of the state, desired the task's pose at the current time
+  and VOI 0. ``reward_type="dense"``: minus (position error in mm + orientation error in rad + the
+  achieved VOI); ``"sparse"``: 0 when within ``tolerance_m`` (default 1 mm) and ``tolerance_rad``
+  (0.05 rad), else -1. VOI is a property of the state that a pose does not determine, so the achieved
+  goal carries it: relabelled transitions keep it, and ``compute_reward`` needs no ``info`` (SB3's
+  ``HerReplayBuffer`` passes empty ones unless ``copy_info_dict=True``). The desired VOI is not scored.
 * ViewTrackingGoal: the goal is a camera pose ``[p (m, 3), rotation vector (rad, 3)]``: achieved the
   continuum endoscope's camera, desired the da Vinci's. The reward is the exact overlap ratio of the
   two view frustums (dense) or 0 when it exceeds ``or_threshold`` (0.8), else -1 (sparse).
@@ -26,7 +28,7 @@ from gymnasium import spaces
 from continuum_gym.validation import choice, fraction, positive
 
 REWARD_TYPES = ("dense", "sparse")
-GOAL_DIM = 6
+GOAL_DIM = 6  #: a pose: position (m, 3) and rotation vector (rad, 3)
 
 
 def _pose_goal(p: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -35,30 +37,23 @@ def _pose_goal(p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return np.concatenate([p, rotation_vector(R)]).astype(np.float64)
 
 
-def _split_goal(goal: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (..., 3), rotations (..., 3, 3)) of goals (..., 6)."""
+def _split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "position (m), rotation vector (rad)"):
+    """(positions (..., 3), rotations (..., 3, 3), the goal array) of goals (..., size) that start with a pose."""
     from scipy.spatial.transform import Rotation
 
     goal = np.asarray(goal, dtype=np.float64)
-    if goal.shape[-1:] != (GOAL_DIM,):
-        raise ValueError(f"{name} must have shape (..., {GOAL_DIM}) [position (m), rotation vector (rad)]; got "
-                         f"{goal.shape}")
-    flat = goal.reshape(-1, GOAL_DIM)
+    if goal.shape[-1:] != (size,):
+        raise ValueError(f"{name} must have shape (..., {size}) [{layout}]; got {goal.shape}")
+    flat = goal[..., :GOAL_DIM].reshape(-1, GOAL_DIM)
     rotations = Rotation.from_rotvec(flat[:, 3:]).as_matrix().reshape(goal.shape[:-1] + (3, 3))
-    return goal[..., :3], rotations
-
-
-def _info_values(info: Any, key: str, shape: tuple) -> np.ndarray:
-    """``info[key]`` of one info dict, or of each of an array/list of them (HER passes a batch)."""
-    if isinstance(info, dict):
-        return np.broadcast_to(np.asarray(info[key], dtype=np.float64), shape)
-    return np.array([item[key] for item in np.asarray(info, dtype=object).reshape(-1)], dtype=np.float64).reshape(shape)
+    return goal[..., :3], rotations, goal
 
 
 class ContinuumGoalEnv(gym.Env):
     """A goal-conditioned front end of a ``ContinuumGym/`` env (subclasses set ``base_id``)."""
 
     base_id: str = ""
+    goal_dim: int = GOAL_DIM
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, reward_type: str = "dense", render_mode: str | None = None, camera: str = "external",
@@ -68,7 +63,7 @@ class ContinuumGoalEnv(gym.Env):
         self.base = gym.make(self.base_id, render_mode=render_mode, camera=camera, **kwargs).unwrapped
         self.render_mode = render_mode
         self.metadata = self.base.metadata
-        goal_space = spaces.Box(-np.inf, np.inf, (GOAL_DIM,), dtype=np.float64)
+        goal_space = spaces.Box(-np.inf, np.inf, (self.goal_dim,), dtype=np.float64)
         self.observation_space = spaces.Dict({"observation": self.base.observation_space,
                                               "achieved_goal": goal_space, "desired_goal": goal_space})
         self.action_space = self.base.action_space
@@ -80,22 +75,27 @@ class ContinuumGoalEnv(gym.Env):
     def core(self):
         return self.base.core
 
-    def _observation(self, observation: np.ndarray) -> dict:
-        achieved, desired = self.goals()
+    @property
+    def config(self):
+        """The base env's ``EnvConfig`` (``continuum_gym.save_config`` writes it)."""
+        return self.base.core.config
+
+    def _observation(self, observation: np.ndarray, info: dict) -> dict:
+        achieved, desired = self.goals(info)
         return {"observation": observation, "achieved_goal": achieved, "desired_goal": desired}
 
-    def goals(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
-        """(achieved_goal, desired_goal) of the current state, each (6,)."""
+    def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface
+        """(achieved_goal, desired_goal) of the current state (``info``: the base env's), each (goal_dim,)."""
         raise NotImplementedError
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         observation, info = self.base.reset(seed=seed, options=options)
-        return self._observation(observation), info
+        return self._observation(observation, info), info
 
     def step(self, action):
         observation, _, terminated, truncated, info = self.base.step(action)
-        goal_observation = self._observation(observation)
+        goal_observation = self._observation(observation, info)
         reward = float(self.compute_reward(goal_observation["achieved_goal"], goal_observation["desired_goal"], info))
         return goal_observation, reward, terminated, truncated, info
 
@@ -109,6 +109,7 @@ class ContinuumGoalEnv(gym.Env):
 class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
     __doc__ = __doc__
     base_id = "ContinuumGym/OcclusionAvoidance-v0"
+    goal_dim = GOAL_DIM + 1  # the pose and the state's VOI
 
     def __init__(self, reward_type: str = "dense", tolerance_m: float = 1e-3, tolerance_rad: float = 0.05,
                  **kwargs: Any) -> None:
@@ -116,24 +117,25 @@ class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
         self.tolerance_rad = positive(tolerance_rad, "tolerance_rad", "rad")
         super().__init__(reward_type, **kwargs)
 
-    def goals(self) -> tuple[np.ndarray, np.ndarray]:
+    def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:
         core = self.core
         p, R = core.robot.forward_kinematics(np.ascontiguousarray(core.q[0]))
         t = core.steps[0] * core.control_dt
         p_des, _ = core.desired(0, t)
-        return _pose_goal(p, R), _pose_goal(p_des, core.desired_rotation(0, t))
+        return (np.append(_pose_goal(p, R), float(info["voi"])),
+                np.append(_pose_goal(p_des, core.desired_rotation(0, t)), 0.0))
 
     def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> np.ndarray:
         """Reward of (achieved, desired) goal pairs of any leading shape (see the module docstring)."""
-        p_a, R_a = _split_goal(achieved_goal, "achieved_goal")
-        p_d, R_d = _split_goal(desired_goal, "desired_goal")
+        layout = "position (m), rotation vector (rad), VOI"
+        p_a, R_a, achieved = _split_goal(achieved_goal, "achieved_goal", self.goal_dim, layout)
+        p_d, R_d, _ = _split_goal(desired_goal, "desired_goal", self.goal_dim, layout)
         position = np.linalg.norm(p_a - p_d, axis=-1)
         relative = np.einsum("...ji,...jk->...ik", R_a, R_d)
         orientation = np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
         if self.reward_type == "sparse":
             return -((position > self.tolerance_m) | (orientation > self.tolerance_rad)).astype(np.float64)
-        voi = _info_values(info, "voi", position.shape)
-        return -(1e3 * position + orientation + voi)
+        return -(1e3 * position + orientation + achieved[..., GOAL_DIM])
 
 
 class ViewTrackingGoalEnv(ContinuumGoalEnv):
@@ -144,7 +146,7 @@ class ViewTrackingGoalEnv(ContinuumGoalEnv):
         self.or_threshold = fraction(or_threshold, "or_threshold")
         super().__init__(reward_type, **kwargs)
 
-    def goals(self) -> tuple[np.ndarray, np.ndarray]:
+    def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:
         core = self.core
         p_cam, R_cam = core.robot.forward_kinematics(np.ascontiguousarray(core.q[0]))
         p_dv, R_dv = core.davinci.forward_kinematics(core.davinci_configuration(0))
@@ -154,8 +156,8 @@ class ViewTrackingGoalEnv(ContinuumGoalEnv):
         """Overlap ratio (dense) or its threshold indicator (sparse) of camera-pose goal pairs, batched."""
         from continuum_gym.geometry import overlap_ratio
 
-        p_a, R_a = _split_goal(achieved_goal, "achieved_goal")
-        p_d, R_d = _split_goal(desired_goal, "desired_goal")
+        p_a, R_a, _ = _split_goal(achieved_goal, "achieved_goal")
+        p_d, R_d, _ = _split_goal(desired_goal, "desired_goal")
         ratio = np.asarray(overlap_ratio(p_d, R_d, p_a, R_a, self.core.frustum), dtype=np.float64)
         if self.reward_type == "sparse":
             return -(ratio <= self.or_threshold).astype(np.float64)
