@@ -1,6 +1,8 @@
 """continuum-gym: Gymnasium environments for continuum surgical robots beside an endoscope.
 
 ``import continuum_gym`` registers the ``ContinuumGym/`` environment ids with Gymnasium.
+``save_config(env, path)`` and ``make_from_config(path)`` write an env's configuration and make the
+same env from it (``continuum_gym.config_files``; loaded on first use).
 """
 
 __version__ = "0.2.0"
@@ -9,4 +11,13 @@ from continuum_gym.envs.registration import ENV_IDS, register_envs  # noqa: E402
 
 register_envs()
 
-__all__ = ["__version__", "ENV_IDS"]
+_EXPORTS = {"save_config": "config_files", "make_from_config": "config_files", "load_config": "config_files"}
+__all__ = ["__version__", "ENV_IDS", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

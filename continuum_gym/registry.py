@@ -26,6 +26,10 @@ Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):
   metrics named as in ``info``; applied once per batch step.
 
 Every entry point checks its input and raises ``ValueError`` naming the parameter and the valid range.
+
+Each registration records the importable module that made it (``origin_of``): configs, pickles and
+``config.yml`` files refer to a plug-in as ``"module:name"``, so another process rebuilds it by importing
+that module (``continuum_gym.plugins``). Anything registered at import of such a module travels.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from continuum_gym import plugins
 from continuum_gym.validation import closest, describe, number
 
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
@@ -76,6 +81,29 @@ ROBOTS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
 TASKS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
 CONTROLLERS: dict[str, dict[str, CustomController]] = {OCCLUSION: {}, VIEW: {}}
 REWARD_TERMS: dict[str, dict[str, RewardTerm]] = {OCCLUSION: {}, VIEW: {}}
+#: The importable module each plug-in was registered from (None: __main__, a notebook), per env and name.
+ORIGINS: dict[str, dict[tuple[str, str], str | None]] = {OCCLUSION: {}, VIEW: {}}
+_TABLES = {"robot": ROBOTS, "task": TASKS, "controller": CONTROLLERS, "reward term": REWARD_TERMS}
+
+
+def _record(kind: str, env: str, name: str, origin: str | None) -> None:
+    ORIGINS[env][(kind, name)] = origin
+    plugins.remember(origin)
+
+
+def origin_of(kind: str, env: str, name: str) -> str | None:
+    """The module that registered the ``kind`` (robot, task, controller, reward term) ``name`` of ``env``."""
+    return ORIGINS.get(env, {}).get((kind, name))
+
+
+def reference_of(kind: str, env: str, name: str) -> str:
+    """``"module:name"`` for a plug-in registered at import of an importable module, else ``name``."""
+    return plugins.reference(name, origin_of(kind, env, name))
+
+
+def resolve(kind: str, env: str, value: str) -> str:
+    """The registered name that ``value`` (a name or ``"module:name"``) refers to, importing its module."""
+    return plugins.lookup(_TABLES[kind][env], value, f"{kind}", env)
 
 
 def _env(env: str) -> str:
@@ -106,6 +134,7 @@ def register_robot(name: str, robot, *, replace: bool = False) -> None:
     else:
         raise ValueError(f"robot must be a MultiBackboneRobot or a ContinuumEndoscope; got {describe(robot)}")
     ROBOTS[env][_name(name, ROBOTS[env], "registered robot", replace)] = robot
+    _record("robot", env, name, plugins.caller_origin())
 
 
 def robot_names(env_id: str) -> tuple:
@@ -138,6 +167,7 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
     source = SampledTasks(_name(name, TASKS[env], "registered task", replace), sampler, kind, count)
     source.draw("train", 0)  # fails now, naming the problem, rather than at the first reset
     TASKS[env][name] = source
+    _record("task", env, name, plugins.caller_origin())
 
 
 def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Sequence[float] = (), doc: str = "",
@@ -160,6 +190,7 @@ def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Seque
     controller = CustomController(name, env, rates, params, doc)
     check_controller(controller)
     CONTROLLERS[env][name] = controller
+    _record("controller", env, name, plugins.caller_origin())
     return controller
 
 
@@ -187,6 +218,7 @@ def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float =
     term = RewardTerm(name, env, fn, weight, bool(compiled), params)
     check_reward_term(term)
     REWARD_TERMS[env][name] = term
+    _record("reward term", env, name, plugins.caller_origin())
     return term
 
 
@@ -196,10 +228,13 @@ def unregister(name: str, env: str = OCCLUSION) -> None:
     for table in (ROBOTS, TASKS, CONTROLLERS, REWARD_TERMS):
         if name in table[env]:
             del table[env][name]
+            for key in [key for key in ORIGINS[env] if key[1] == name and table is _TABLES[key[0]]]:
+                del ORIGINS[env][key]
             return
     known = [*ROBOTS[env], *TASKS[env], *CONTROLLERS[env], *REWARD_TERMS[env]]
     raise ValueError(f"nothing named {name!r} is registered for {env}{closest(name, known)}; registered: {known}")
 
 
 __all__ = ["register_robot", "register_task", "register_controller", "register_reward_term", "unregister",
-           "CustomController", "RewardTerm", "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS"]
+           "origin_of", "reference_of", "resolve", "CustomController", "RewardTerm", "ROBOTS", "TASKS",
+           "CONTROLLERS", "REWARD_TERMS", "ORIGINS"]

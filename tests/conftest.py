@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,20 @@ def load_reference() -> dict:
     if not REFERENCE_PATH.exists():
         raise FileNotFoundError(f"reference values missing: {REFERENCE_PATH} (part of the repository)")
     return json.loads(REFERENCE_PATH.read_text())
+
+
+@pytest.fixture(autouse=True)
+def plugin_modules_stay_in_their_test():
+    """A registration records its module in CONTINUUM_GYM_PLUGINS for child processes (continuum_gym.plugins);
+    a test's registrations must not make later tests' subprocesses import that test's module."""
+    from continuum_gym.plugins import ENV_VAR
+
+    before = os.environ.get(ENV_VAR)
+    yield
+    if before is None:
+        os.environ.pop(ENV_VAR, None)
+    else:
+        os.environ[ENV_VAR] = before
 
 
 @pytest.fixture(scope="session")

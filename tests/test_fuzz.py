@@ -99,6 +99,10 @@ FLAG_VALUES = {
                 "--env": ["nope"], "--controller": ["nope"], "--split": ["nope"]},
     "reproduce": {"--grid": ["0", "-1", "abc"]},
 }
+FLAG_VALUES["render"].update({"--supersample": ["0", "abc"], "--gap": ["-1", "abc"], "--elevation": ["90", "nan"],
+                              "--distance": ["0", "nan"]})
+for _flags in FLAG_VALUES.values():  # every subcommand imports plug-in modules first, and names a bad one
+    _flags["--import"] = ["no_such_module_xyz", "1bad.name"]
 CLI_CASES = [(command, flag, value) for command, flags in FLAG_VALUES.items() for flag, values in flags.items()
              for value in values]
 

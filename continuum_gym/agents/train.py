@@ -44,7 +44,7 @@ from continuum_gym.agents.run_inputs import (
     seed_number,
     whole_number,
 )
-from continuum_gym.envs.spec import ENV_SPECS, get_spec
+from continuum_gym.envs.spec import ENV_SPECS, get_spec, registered_kwargs
 from continuum_gym.evaluation.io import (
     temporary_files,
     write_bytes_atomic,
@@ -82,13 +82,25 @@ def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
         raise ValueError(f"{path} is empty; expected a mapping of env id to a block of hyperparameters")
     if not isinstance(table, dict):
         raise ValueError(f"{path} must map env ids to blocks of hyperparameters; got a {type(table).__name__}")
+    key = env_id
     if env_id not in table:
         blocks = sorted(str(k) for k in table if k != "default")
-        raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
-    block = table[env_id]
+        base_id = get_spec(env_id).env_id
+        if base_id == env_id or base_id not in table:
+            raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
+        key = base_id  # a user's registered id trains with its library env's block
+    block = table[key]
     if not isinstance(block, dict):
-        raise ValueError(f"{path}: the block for {env_id!r} must be a mapping of hyperparameters; got {block!r}")
-    return dict(block)
+        raise ValueError(f"{path}: the block for {key!r} must be a mapping of hyperparameters; got {block!r}")
+    block = dict(block)
+    if key != env_id:
+        registered = registered_kwargs(env_id)
+        kept = {k: v for k, v in dict(block.get("env_kwargs") or {}).items() if k not in registered}
+        block["env_kwargs"] = kept
+        print(f"note: {path.name} has no block for {env_id!r}; using the block of {key!r}, with the env keywords "
+              f"{env_id!r} was registered with taking precedence (your own: --hyperparams FILE; the format is in "
+              "docs/configure.md)", file=sys.stderr)
+    return block
 
 
 def resolve_hyperparams(algo: str, env_id: str, path=None) -> dict:
@@ -110,13 +122,27 @@ def linear_schedule(value, name: str):
     return LinearSchedule(initial, 0.0, 1.0)
 
 
-def validate(env_id: str, algo: str, base) -> None:
-    """``ValueError`` unless env_id is known, algo one of ``ALGOS`` and base one of the env's baselines or None."""
+def validate(env_id: str, algo: str, base) -> str | None:
+    """The base controller's name; ``ValueError`` unless env_id is known, algo one of ``ALGOS`` and base a
+    baseline of the env, a registered controller (a name or ``"module:name"``) or None."""
+    from continuum_gym import registry
+
     spec = get_spec(env_id)
     if algo not in ALGOS:
         raise ValueError(f"unknown algo {algo!r}; valid: {list(ALGOS)}")
-    if base is not None and base not in spec.baselines:
-        raise ValueError(f"unknown base {base!r} for {env_id}; valid: {list(spec.baselines)} or none")
+    if base is None or base in spec.baselines:
+        return base
+    try:
+        return registry.resolve("controller", spec.env_id, base)
+    except ValueError as error:
+        raise ValueError(f"unknown base {base!r} for {env_id}; valid: {list(spec.baselines)}, a registered "
+                         f"controller or none. {error}") from None
+
+
+def default_base(env_id: str):
+    """The base an id trains on by default: the one it was registered with, else its env's headline baseline."""
+    registered = registered_kwargs(env_id)
+    return registered["base_controller"] if "base_controller" in registered else get_spec(env_id).headline_baseline
 
 
 def _algo_class(algo):
@@ -242,8 +268,8 @@ def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, ste
     ``ValueError`` for bad input, ``FileExistsError`` rather than overwriting, before writing anything.
     """
     if base == "__default__":
-        base = get_spec(env_id).headline_baseline
-    validate(env_id, algo, base)
+        base = default_base(env_id)
+    base = validate(env_id, algo, base)
     seed = seed_number("seed", seed)
     source = f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]"
     hp = resolve_hyperparams(algo, env_id, hyperparams)

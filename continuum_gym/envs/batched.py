@@ -218,9 +218,8 @@ class BatchedCore:
 
         controllers = registry.CONTROLLERS[self.spec.env_id]
         if self.base_controller is not None and self.base_controller not in self.spec.baselines \
-                and self.base_controller not in controllers:
-            raise ValueError(f"base_controller {self.base_controller!r} is not registered in this process: call "
-                             "continuum_gym.registry.register_controller before building or unpickling the env")
+                and self.base_controller not in controllers:  # imports the plug-in's module, or says where to
+            registry.resolve("controller", self.spec.env_id, self.base_controller)
         self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._step_call = KernelCall(self.step_kernel)

@@ -51,6 +51,8 @@ MAX_RESIDUAL_SCALE = 10.0
 #: Reward weights are scale factors of terms of order 1; beyond this the reward overflows to inf.
 MAX_REWARD_WEIGHT = 1e6
 MAX_GRID = 401
+#: Keywords whose objects (robot, cone, da Vinci endoscope) may also be given as ``to_dict()`` writes them.
+OBJECT_KEYWORDS = ("robot", "cone", "davinci")
 
 
 def spec(unit: str = "", doc: str = "", type_name: str = "") -> dict:
@@ -91,6 +93,8 @@ class EnvConfig:
             elif key not in names:
                 raise UnknownArgumentError(f"{cls.env_id} got an unexpected keyword argument {key!r}"
                                            f"{closest(key, names)}; valid arguments: {sorted(names)}")
+            elif key in OBJECT_KEYWORDS and isinstance(kwargs[key], dict) and "type" in kwargs[key]:
+                kwargs[key] = cls._build_object(key, dict(kwargs[key]))  # as config.yml writes it
         return cls(**kwargs)
 
     def replace(self, **changes: Any) -> EnvConfig:
@@ -110,18 +114,44 @@ class EnvConfig:
                 value = {"type": type(value).__name__, **value.to_dict()}
             elif f.name == "task" and not isinstance(value, str):
                 value = {"type": "recorded", "description": self.task_source.describe()}
+            elif f.name in ("task", "base_controller") and isinstance(value, str):
+                value = self._reference(f.name, value)
             elif isinstance(value, tuple):
                 value = list(value)
             elif isinstance(value, dict):
                 value = dict(value)
             out[f.name] = value
+        modules = _plugin_modules(self)
+        if modules:
+            out["plugins"] = modules
         return out
+
+    def _reference(self, key: str, name: str) -> str:
+        """A registered task family or controller as ``"module:name"`` (another process imports the module)."""
+        from continuum_gym import registry
+
+        kind, table = ("task", registry.TASKS) if key == "task" else ("controller", registry.CONTROLLERS)
+        return registry.reference_of(kind, self.env_id, name) if name in table[self.env_id] else name
+
+    def __reduce__(self):
+        # Pickles carry the plug-ins' modules: unpickling imports them (registering the plug-ins) and
+        # rebuilds the config through its checks, in any process.
+        kwargs = self.as_kwargs()
+        for key in ("task", "base_controller"):
+            if isinstance(kwargs[key], str):
+                kwargs[key] = self._reference(key, kwargs[key])
+        return _config_from_pickle, (type(self), kwargs, _plugin_modules(self))
 
     @classmethod
     def from_dict(cls, data: dict) -> EnvConfig:
         """Inverse of ``to_dict`` (objects are rebuilt from their dicts)."""
         if not isinstance(data, dict):
             raise ValueError(f"an env config must be a mapping of argument -> value; got {describe(data)}")
+        data = dict(data)
+        if "plugins" in data:  # the modules that register the config's plug-ins
+            from continuum_gym import plugins
+
+            plugins.import_modules(data.pop("plugins") or [], "plugins (a module of the config)")
         kwargs = {}
         for key, value in data.items():
             if isinstance(value, dict) and "type" in value:
@@ -180,19 +210,27 @@ class EnvConfig:
 
 def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
     from continuum_gym import registry
-    from continuum_gym.envs.spec import ENV_SPECS
     from continuum_gym.envs.task_sources import resolve_task
 
     set_ = object.__setattr__
+    if isinstance(config.task, str) and config.task not in tasks and (
+            ":" in config.task or config.task in registry.TASKS[config.env_id]):
+        set_(config, "task", registry.resolve("task", config.env_id, config.task))
+    elif isinstance(config.task, str) and config.task not in tasks and config.task not in registry.TASKS[config.env_id]:
+        from continuum_gym import plugins
+
+        plugins.load_known()  # a task family of a plug-in module that this process has not imported yet
     source = resolve_task(config.task, config.env_id, tasks, config.env_id == OcclusionConfig.env_id)
     set_(config, "_task_source", source)
     choice(config.task_split, TASK_SPLITS, "task_split")
     if source.test_only and config.task_split != "test":
         raise ValueError(f"task={config.task!r} is a fixed evaluation task of the paper: use task_split='test' "
                          f"(training draws from {[t for t in tasks if t not in test_only]})")
-    if config.base_controller is not None:
-        choice(config.base_controller, (*ENV_SPECS[config.env_id].baselines,
-                                        *registry.controller_names(config.env_id)), "base_controller")
+    set_(config, "base_controller", _resolve_controller(config))
+    if isinstance(config.reward_weights, dict) and not set(config.reward_weights) <= set(config.all_default_weights()):
+        from continuum_gym import plugins
+
+        plugins.load_known()  # a reward term of a plug-in module that this process has not imported yet
     set_(config, "reward_weights", weights(config.reward_weights, config.all_default_weights(), high=MAX_REWARD_WEIGHT))
     set_(config, "residual_scale", number(config.residual_scale, "residual_scale", low=0.0, high=MAX_RESIDUAL_SCALE,
                                           low_open=True, unit="fraction of the action scale"))
@@ -261,13 +299,12 @@ class OcclusionConfig(EnvConfig):
         type_name="LensCone or None"))
 
     def __post_init__(self) -> None:
-        from continuum_gym import registry
         from continuum_gym.baselines.occlusion import OcclusionLimits
         from continuum_gym.geometry.lens_cone import LensCone
         from continuum_gym.robots import MultiBackboneRobot
 
         set_ = object.__setattr__
-        set_(self, "robot", _resolve_robot(self.robot, MultiBackboneRobot, registry.ROBOTS[self.env_id]))
+        set_(self, "robot", _resolve_robot(self.robot, MultiBackboneRobot, self.env_id))
         if self.cone is not None and not isinstance(self.cone, LensCone):
             raise ValueError(f"cone must be a LensCone or None; got {describe(self.cone)}")
         if self.lens_model is not None:
@@ -350,11 +387,10 @@ class ViewTrackingConfig(EnvConfig):
         type_name="DaVinciEndoscope or None"))
 
     def __post_init__(self) -> None:
-        from continuum_gym import registry
         from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
         set_ = object.__setattr__
-        set_(self, "robot", _resolve_robot(self.robot, ContinuumEndoscope, registry.ROBOTS[self.env_id]))
+        set_(self, "robot", _resolve_robot(self.robot, ContinuumEndoscope, self.env_id))
         if self.davinci is None:
             set_(self, "davinci", DaVinciEndoscope())
         elif not isinstance(self.davinci, DaVinciEndoscope):
@@ -382,18 +418,62 @@ class ViewTrackingConfig(EnvConfig):
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
 
 
-def _resolve_robot(robot: Any, kind: type, registered: dict):
-    """A robot instance from an instance, a registered name or None (the paper's)."""
+def _resolve_robot(robot: Any, kind: type, env_id: str):
+    """A robot instance from an instance, a registered name (or ``"module:name"``) or None (the paper's)."""
+    from continuum_gym import registry
+
     if robot is None:
         return kind()
     if isinstance(robot, str):
-        if robot not in registered:
-            raise ValueError(f"robot {robot!r} is not registered{closest(robot, registered)}; registered robots: "
-                             f"{sorted(registered)} (continuum_gym.registry.register_robot), or pass a {kind.__name__}")
-        return registered[robot]
+        try:
+            return registry.ROBOTS[env_id][registry.resolve("robot", env_id, robot)]
+        except ValueError as error:
+            raise ValueError(f"robot {robot!r} is not registered (continuum_gym.registry.register_robot), nor a "
+                             f"{kind.__name__}: {error}") from None
     if not isinstance(robot, kind):
         raise ValueError(f"robot must be a {kind.__name__}, a registered robot's name or None; got {describe(robot)}")
     return robot
+
+
+def _resolve_controller(config: EnvConfig) -> str | None:
+    """The base controller's name: a built-in baseline, a registered controller (or ``"module:name"``) or None."""
+    from continuum_gym import registry
+    from continuum_gym.envs.spec import ENV_SPECS
+
+    value = config.base_controller
+    builtin = ENV_SPECS[config.env_id].baselines
+    if value is None or (isinstance(value, str) and value in builtin):
+        return value
+    if not isinstance(value, str):
+        choice(value, builtin, "base_controller")
+    try:
+        return registry.resolve("controller", config.env_id, value)
+    except ValueError as error:
+        raise ValueError(f"base_controller must be one of {list(builtin)}, a registered controller or None"
+                         f"{closest(value, builtin) if ':' not in value else ''}; got {value!r}. If it is your own "
+                         f"controller: {error}") from None
+
+
+def _plugin_modules(config: EnvConfig) -> list:
+    """The importable modules of the plug-ins a config uses (controller, task family, reward terms)."""
+    from continuum_gym import registry
+
+    env = config.env_id
+    names = [("reward term", name) for name in registry.REWARD_TERMS[env]]
+    if config.base_controller in registry.CONTROLLERS[env]:
+        names.append(("controller", config.base_controller))
+    if isinstance(config.task, str) and config.task in registry.TASKS[env]:
+        names.append(("task", config.task))
+    modules = [registry.origin_of(kind, env, name) for kind, name in names]
+    return sorted({module for module in modules if module})
+
+
+def _config_from_pickle(cls: type, kwargs: dict, modules: list) -> EnvConfig:
+    """Unpickling: import the plug-ins' modules (registering them in this process), then rebuild and check."""
+    from continuum_gym import plugins
+
+    plugins.import_modules(modules)
+    return cls.from_kwargs(**kwargs)
 
 
 __all__ = ["UnknownArgumentError", "EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]

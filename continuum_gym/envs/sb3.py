@@ -17,6 +17,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from continuum_gym.envs.batched import check_actions
+from continuum_gym.envs.single import CoreOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.envs.vector import row_generators
 from continuum_gym.validation import integer
@@ -27,7 +28,7 @@ def core_class(env_id: str) -> type:
     return get_spec(env_id).core_class()
 
 
-class ContinuumSB3VecEnv(VecEnv):
+class ContinuumSB3VecEnv(CoreOwner, VecEnv):
     """N environments of ``env_id`` in one process, stepped by one compiled call.
 
     Each row's ``info`` holds what ``DummyVecEnv`` over ``gym.make(env_id)`` wrapped in SB3's

@@ -44,7 +44,16 @@ def check_render_arguments(metadata: dict, core: BatchedCore, render_mode: Any, 
     return render_mode, camera, pixel_occlusion
 
 
-class SceneOwner:
+class CoreOwner:
+    """A front end of a batched core: ``config`` is the core's validated configuration."""
+
+    @property
+    def config(self):
+        """The env's ``EnvConfig`` (every keyword, validated; ``continuum_gym.save_config`` writes it)."""
+        return self.core.config
+
+
+class SceneOwner(CoreOwner):
     """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""
 
     _scene = None

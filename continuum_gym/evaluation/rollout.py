@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from continuum_gym.envs.spec import get_spec
+from continuum_gym.envs.spec import get_spec, registered_kwargs
 
 
 class ZeroResidual:
@@ -24,8 +24,12 @@ class ZeroResidual:
 
 
 def make_core(env_id: str, num_envs: int, **env_kwargs):
-    """A batched core of ``env_id`` with ``num_envs`` rows (any id registered to the library's entry points)."""
-    return get_spec(env_id).make_core(num_envs, **env_kwargs)
+    """A batched core of ``env_id`` with ``num_envs`` rows (any id registered to the library's entry points).
+
+    A user's registered id is built as ``gym.make`` builds it: its registered keyword arguments, then
+    ``env_kwargs`` over them.
+    """
+    return get_spec(env_id).make_core(num_envs, **{**registered_kwargs(env_id), **env_kwargs})
 
 
 def run_episodes(core, policy, task_ids, progress: bool | None = None, record: bool = False) -> dict:
