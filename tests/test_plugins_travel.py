@@ -281,3 +281,25 @@ def test_the_cli_imports_plugins_before_it_reads_any_argument(my_lab, tmp_path):
     assert env_config["robot"]["lengths"] == [0.030, 0.025]
     history = np.load(run / "evaluations.npz")
     assert history["timesteps"].size >= 1  # the training-time evaluation ran in the variant's env
+
+
+def test_evaluate_gives_a_registered_controller_its_row_and_measures_headroom_against_it(my_lab, tmp_path):
+    """A residual trained on the user's controller: its baseline row, its row, headroom against that base."""
+    from continuum_gym.agents.train import train
+    from continuum_gym.evaluation.evaluate import discover_policies, evaluate_methods
+    from continuum_gym.evaluation.tables import HEADROOM
+
+    hyperparams = tmp_path / "tiny.yml"
+    hyperparams.write_text(f"{BASE}:\n  n_envs: 4\n  n_steps: 16\n  batch_size: 32\n  n_epochs: 1\n"
+                           "  eval_freq: 1000\n  n_eval_episodes: 2\n  checkpoint_freq: 1000\n")
+    train(MY_ID, steps=64, out=tmp_path / "runs", progress=False, hyperparams=hyperparams)
+    table, results, _ = evaluate_methods(MY_ID, [], discover_policies(tmp_path / "runs"), episodes=2,
+                                         split="validation", progress=False)
+    assert list(table) == ["minimum_norm", "projected_gradient", "mylab_dls", "residual_mylab_dls", "offline_optimum"]
+    assert HEADROOM not in table["mylab_dls"]
+    hold = {m: float(np.mean(np.stack(results[m]["hold"]["scores"]["mean_voi"]))) for m in results}
+    optimum = table["offline_optimum"]["mean_voi"]["mean"]
+    expected = (hold["residual_mylab_dls"] - hold["mylab_dls"]) / (optimum - hold["mylab_dls"])
+    assert table["residual_mylab_dls"][HEADROOM]["mean"] == pytest.approx(expected, rel=1e-12)
+    # a base other than the headline baseline's: the projected gradient's would give another number
+    assert hold["mylab_dls"] != hold["projected_gradient"]

@@ -58,6 +58,9 @@ RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_f
                 "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2, "normalize_reward": False}
 
 
+_NOTED: set = set()  # (hyperparameter file, env id) pairs whose fallback block was announced
+
+
 class RunBusyError(RuntimeError):
     """Another process is training the same run directory."""
 
@@ -97,9 +100,11 @@ def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
         registered = registered_kwargs(env_id)
         kept = {k: v for k, v in dict(block.get("env_kwargs") or {}).items() if k not in registered}
         block["env_kwargs"] = kept
-        print(f"note: {path.name} has no block for {env_id!r}; using the block of {key!r}, with the env keywords "
-              f"{env_id!r} was registered with taking precedence (your own: --hyperparams FILE; the format is in "
-              "docs/configure.md)", file=sys.stderr)
+        if (str(path), env_id) not in _NOTED:  # said once per process, however often the block is read
+            _NOTED.add((str(path), env_id))
+            print(f"note: {path.name} has no block for {env_id!r}; using the block of {key!r}, with the env keywords "
+                  f"{env_id!r} was registered with taking precedence (your own: --hyperparams FILE; the format is in "
+                  "docs/configure.md)", file=sys.stderr)
     return block
 
 

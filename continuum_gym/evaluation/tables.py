@@ -25,8 +25,13 @@ def grid_scores(task_result: dict, metric) -> np.ndarray:
     return np.stack(task_result["scores"][metric.grid_metric]) > metric.threshold
 
 
-def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int | None = None) -> dict:
-    """<method> -> <metric> -> {mean, iqm, ci_low, ci_high, ...}, over the env's test tasks."""
+def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int | None = None,
+              bases: dict | None = None) -> dict:
+    """<method> -> <metric> -> {mean, iqm, ci_low, ci_high, ...}, over the env's test tasks.
+
+    ``bases`` ({method: base controller}) names the baseline each learned method's ``headroom_closed`` is
+    measured against (default: the env's headline baseline); ``baselines`` lists the analytic rows.
+    """
     from continuum_gym.evaluation.statistics import summarize
 
     spec = get_spec(env_id)
@@ -44,7 +49,7 @@ def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int
         table[method] = row
     if optimum:
         table.update(reference_rows(spec, results, optimum, grid))
-    add_headroom(spec, table, results)
+    add_headroom(spec, table, results, bases)
     return table
 
 
@@ -89,23 +94,31 @@ def method_value(spec: EnvSpec, results: dict, method: str, task: str, metric_na
     return float(np.mean(np.stack(results[method][task]["scores"][metric_name])))
 
 
-def add_headroom(spec: EnvSpec, table: dict, results: dict) -> None:
-    """headroom_closed = (method - base) / (optimum - base) for every non-baseline method, on ``spec.headroom``."""
+def add_headroom(spec: EnvSpec, table: dict, results: dict, bases: dict | None = None) -> None:
+    """headroom_closed = (method - base) / (optimum - base) for every learned method, on ``spec.headroom``.
+
+    A method's base is the controller it was trained on (``bases``), when that controller has a row;
+    otherwise, and for pure RL, the env's headline baseline. Analytic rows (``bases[m] == m``) get none.
+    """
     task, metric = spec.headroom
-    base = spec.headline_baseline
-    if "offline_optimum" not in table or base not in results:
-        return
-    if metric not in table["offline_optimum"] or task not in results[base]:
+    bases = bases or {}
+    if "offline_optimum" not in table or metric not in table["offline_optimum"]:
         return
     optimum = table["offline_optimum"][metric]["mean"]
-    reference = method_value(spec, results, base, task, metric)
-    if abs(optimum - reference) < 1e-12:
-        return
-    where = f"{task} grid, {metric}" if results[base][task]["grid"] else f"{task} tasks, {metric}"
     for method in results:
-        if method not in spec.baselines:
-            closed = (method_value(spec, results, method, task, metric) - reference) / (optimum - reference)
-            table[method][HEADROOM] = {"mean": closed, "iqm": closed, "ci_low": closed, "ci_high": closed, "on": where}
+        if method in spec.baselines or bases.get(method) == method:
+            continue
+        base = bases.get(method)
+        if base not in results:
+            base = spec.headline_baseline
+        if base not in results or task not in results[base]:
+            continue
+        reference = method_value(spec, results, base, task, metric)
+        if abs(optimum - reference) < 1e-12:
+            continue
+        where = f"{task} grid, {metric}" if results[base][task]["grid"] else f"{task} tasks, {metric}"
+        closed = (method_value(spec, results, method, task, metric) - reference) / (optimum - reference)
+        table[method][HEADROOM] = {"mean": closed, "iqm": closed, "ci_low": closed, "ci_high": closed, "on": where}
 
 
 # ---------------------------------------------------------------------- report
