@@ -26,6 +26,7 @@ from continuum_gym.envs.spec import (
     VIEW_SPEC,
     EnvSpec,
     get_spec,
+    registered_kwargs,
 )
 from continuum_gym.evaluation.tables import (
     aggregate,
@@ -123,18 +124,50 @@ def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict
     return env_kwargs, policy, ignored
 
 
-def baseline_methods(spec: EnvSpec) -> list:
-    """[(baseline, [MethodRun])] in table order: the residual env with a zero residual is the baseline."""
-    return [(base, [MethodRun(None, {"base_controller": base})]) for base in spec.baselines]
+def baseline_methods(spec: EnvSpec, own: list | tuple = ()) -> list:
+    """[(baseline, [MethodRun])] in table order: the residual env with a zero residual is the baseline.
+
+    ``own``: registered controllers (names or ``"module:name"``) that get a row of their own after the
+    built-in baselines, named by the controller (a residual trained on one is ``residual_<name>``).
+    """
+    from continuum_gym.plugins import split_reference
+
+    names = list(spec.baselines)
+    rows = [(base, [MethodRun(None, {"base_controller": base})]) for base in spec.baselines]
+    for reference in own:
+        name = split_reference(reference)[1]
+        if name not in names:
+            names.append(name)
+            rows.append((name, [MethodRun(None, {"base_controller": reference})]))
+    return rows
 
 
-def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict) -> list:
-    """[(method, [MethodRun])] of the SB3 runs found by :func:`discover_policies` for ``spec``'s env.
+def own_bases(spec: EnvSpec, env_id: str, methods: list) -> list:
+    """The registered controllers in play: the id's own base and those the learned methods were trained on."""
+    candidates = [registered_kwargs(env_id).get("base_controller")]
+    candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
+    return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
+
+
+def trained_bases(methods: list) -> dict:
+    """{method: the base controller's row name} of each method whose runs say what they were trained on."""
+    from continuum_gym.plugins import split_reference
+
+    out = {}
+    for name, runs in methods:
+        base = runs[0].env_kwargs.get("base_controller") if runs else None
+        if isinstance(base, str):
+            out[name] = split_reference(base)[1]
+    return out
+
+
+def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict, env_id: str | None = None) -> list:
+    """[(method, [MethodRun])] of the SB3 runs found by :func:`discover_policies` for ``env_id`` (``spec``'s env).
 
     A run that cannot be loaded is reported on stderr and in ``skipped`` ({run: reason}), not fatal.
     """
     out = []
-    for method, runs in sorted(policies.get(spec.env_id, {}).items()):
+    for method, runs in sorted(policies.get(env_id or spec.env_id, {}).items()):
         entries = []
         for run in runs:
             try:
@@ -168,7 +201,10 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
     results: dict = {}
     work = [(name, index, run, task_set, episode_count(task_set, episodes, grid))
             for name, runs in methods for index, run in enumerate(runs) for task_set in task_sets(spec, split)]
-    bar = tqdm(work, desc=spec.short_name, disable=not progress)
+    # No rate and no remaining time: the items differ in cost by two orders of magnitude (a baseline on a
+    # case study, a learned policy on the coverage grid), so any extrapolation from those done would be wrong.
+    bar = tqdm(work, desc=spec.short_name, disable=not progress,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} [{elapsed}{postfix}]")
     failed: set = set()
     for name, index, run, task_set, count in bar:
         if name in failed:
@@ -218,14 +254,16 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
 
     spec = get_spec(env_id)
     check_sizes(episodes, grid)
-    environment, policy_kwargs, ignored = split_env_kwargs(spec, env_kwargs)
+    # A user's registered id: its keywords define the env (robot, cone, ...) and its base, as gym.make's.
+    environment, policy_kwargs, ignored = split_env_kwargs(spec, {**registered_kwargs(env_id), **(env_kwargs or {})})
     extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}, run.source) for run in runs])
              for name, runs in extra]
     skipped: dict = {}
-    methods = baseline_methods(spec) + discovered_methods(spec, policies or {}, skipped) + extra
+    learned = discovered_methods(spec, policies or {}, skipped, env_id) + extra
+    methods = baseline_methods(spec, own_bases(spec, env_id, learned)) + learned
     results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
-    table = aggregate(env_id, results, optimum, grid)
+    table = aggregate(env_id, results, optimum, grid, trained_bases(methods))
     described = {name: {"runs": len(runs), "env_kwargs": [run.env_kwargs for run in runs]} for name, runs in methods}
     meta = metadata(spec, split, episodes, grid, environment, ignored, described)
     meta["skipped"] = skipped
@@ -280,14 +318,17 @@ def check_sizes(episodes: int, grid: int) -> None:
 
 def write_results(out: Path, summary: dict, meta: dict, report: list, json_path: str | Path | None = None,
                   seconds: float | None = None) -> list:
-    """Write ``results.md`` and ``results.json`` (``json_path`` too) atomically; returns the paths written."""
+    """Write ``results.md`` and ``results.json`` (``json_path`` too) atomically; returns the paths written.
+
+    ``json_path`` may name ``out/results.json`` itself (``make demo`` does): it is then written, and listed, once.
+    """
     from continuum_gym.evaluation.io import write_json_atomic, write_text_atomic
 
     out.mkdir(parents=True, exist_ok=True)
     text = "\n".join(report) + (f"\nEvaluation wall time: {seconds:.0f} s\n" if seconds is not None else "")
     document = {**summary, "metadata": meta}
     written = [write_text_atomic(out / "results.md", text), write_json_atomic(out / "results.json", document)]
-    if json_path:
+    if json_path and Path(json_path).resolve() != (out / "results.json").resolve():
         written.append(write_json_atomic(json_path, document))
     return written
 
