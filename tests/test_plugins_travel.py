@@ -303,3 +303,22 @@ def test_evaluate_gives_a_registered_controller_its_row_and_measures_headroom_ag
     assert table["residual_mylab_dls"][HEADROOM]["mean"] == pytest.approx(expected, rel=1e-12)
     # a base other than the headline baseline's: the projected gradient's would give another number
     assert hold["mylab_dls"] != hold["projected_gradient"]
+
+
+def test_datasets_and_renders_of_a_registered_id_are_of_its_variant(my_lab, tmp_path, monkeypatch):
+    """continuum-gym dataset records the id's own base by default, in the id's env; render takes its task."""
+    from continuum_gym.cli import main
+    from continuum_gym.evaluation.datasets import create_dataset
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    dataset = create_dataset(MY_ID, "mylab_dls", episodes=1, root=tmp_path / "minari")
+    assert dataset.spec.dataset_id == "continuum-gym/Occlusion2Seg/mylab_dls-train-v0"
+    episode = next(iter(dataset.iterate_episodes()))
+    assert episode.observations.shape[1] == 27 and episode.actions.shape[1] == 6  # the 2-segment robot
+    env = gym.make(MY_ID, base_controller="mylab_dls", task_split="train")
+    first, _ = env.reset(seed=0, options={"task_id": 0})
+    np.testing.assert_array_equal(episode.observations[0], first)
+    with pytest.raises(ValueError, match="controller must be one of"):
+        create_dataset(MY_ID, "nope", episodes=1, root=tmp_path / "minari")
+    assert main(["render", "--env", MY_ID, "--steps", "2", "--out", str(tmp_path / "still.png")]) == 0
+    assert main(["render", "--env", MY_ID, "--steps", "2", "--task", "circle", "--out", str(tmp_path / "c.png")]) == 2

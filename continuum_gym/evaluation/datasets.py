@@ -51,12 +51,29 @@ def check_dataset_arguments(env_id: str, controller: str, split: str, episodes: 
                             seed: Any) -> tuple[str, str, str, int, float, int]:
     """The arguments, validated with the parameter's name and valid range."""
     spec = get_spec(env_id)
-    controller = choice(controller, spec.baselines, "controller")
+    if controller not in spec.baselines and isinstance(controller, str) and controller in own_controllers(env_id):
+        from continuum_gym import registry
+
+        controller = registry.resolve("controller", spec.env_id, controller)  # the user's controller, by name
+    else:
+        controller = choice(controller, (*spec.baselines, *own_controllers(env_id)), "controller")
     split = choice(split, DATASET_SPLITS, "split")
     episodes = integer(episodes, "episodes", low=1, high=100_000)
     noise = number(noise, "noise", low=0.0, high=10.0)
     seed = integer(seed, "seed", low=0, high=2**32 - 1)
-    return spec.env_id, controller, split, episodes, noise, seed
+    return env_id, controller, split, episodes, noise, seed
+
+
+def own_controllers(env_id: str) -> tuple:
+    """The registered controllers of ``env_id``'s environment (the id's own base first)."""
+    from continuum_gym import registry
+    from continuum_gym.envs.spec import registered_kwargs
+    from continuum_gym.plugins import split_reference
+
+    spec = get_spec(env_id)
+    base = registered_kwargs(env_id).get("base_controller")
+    names = [split_reference(base)[1]] if isinstance(base, str) and base not in spec.baselines else []
+    return tuple(dict.fromkeys([*names, *registry.controller_names(spec.env_id)]))
 
 
 def collect_episodes(env_id: str, controller: str, *, split: str = "train", episodes: int = 10,
@@ -195,7 +212,8 @@ def run(args) -> int:
         jobs = []
         for env_id in args.env:
             spec = get_spec(env_id)
-            for controller in args.controller or spec.baselines:
+            own = own_controllers(env_id)[:1] if get_spec(env_id).env_id != env_id else ()  # a registered id's base
+            for controller in args.controller or (*spec.baselines, *own):
                 for split in args.split:
                     jobs.append(check_dataset_arguments(env_id, controller, split, args.episodes, args.noise,
                                                         args.seed))

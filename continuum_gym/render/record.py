@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.envs.spec import ENV_SPECS, get_spec
+from continuum_gym.envs.spec import ENV_SPECS, get_spec, registered_kwargs
 from continuum_gym.validation import as_finite, integer, number
 
 OUTPUTS = (".gif", ".mp4", ".png")
@@ -30,7 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="'baseline' (zero residual), or a run directory / model .zip / shipped policy name")
     parser.add_argument("--out", required=True,
                         help="output file: .gif or .mp4 (the episode), or .png (a still of the last step)")
-    parser.add_argument("--task", default=None, help="task (default: circle for occlusion, case1 for view tracking)")
+    parser.add_argument("--task", default=None, help="task (default: a registered id's own, else circle for occlusion, "
+                                                            "case1 for view tracking)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=None, help="steps to run (default: the whole episode)")
     parser.add_argument("--size", type=int, default=192, help="image size in pixels (default 192)")
@@ -150,8 +151,8 @@ def run(args) -> int:
     from tqdm.auto import tqdm
 
     try:
-        env = gym.make(args.env, task=args.task or spec.record_task, task_split="test", render_mode="rgb_array",
-                       **env_kwargs)
+        task = args.task or registered_kwargs(args.env).get("task") or spec.record_task  # a registered id's own
+        env = gym.make(args.env, task=task, task_split="test", render_mode="rgb_array", **env_kwargs)
     except ValueError as error:  # --task, or a policy's env kwargs, refused by the env
         print(f"continuum-gym render: --task / policy env kwargs: {error}", file=sys.stderr)
         return 2
