@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	# The local CPU wheel first: a bare `torch` requirement would pull a multi-GB CUDA build.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e .
-	# Compile the kernels now, once (about a minute), so that a first step takes a second, not ~40 s.
+	# Compile the kernels now, once (a few minutes), so that a first step takes about a second, not tens of seconds.
 	$(BIN)/continuum-gym precompile
 	touch $(STAMP)
 

@@ -22,6 +22,11 @@ from pathlib import Path
 MANIFEST = "manifest.json"
 
 _WORKER_FLAG = "--worker"
+#: Starts a worker's progress lines on its stdout; its other stdout lines are passed on as they are.
+_PROGRESS = "continuum-gym-precompile-progress"
+#: No rate and no remaining time: the steps differ in cost by orders of magnitude (an env's first step
+#: compiles most of its kernels, the next ones reuse them), so any extrapolation from them would be wrong.
+_BAR_FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} steps [{elapsed}{postfix}]"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -33,7 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--check", action="store_true",
                         help="only report whether the set matches these sources (exit status 1 if not)")
     parser.add_argument(_WORKER_FLAG, default=None, choices=_env_ids(), help=argparse.SUPPRESS)
-    parser.add_argument("--position", type=int, default=0, help=argparse.SUPPRESS)
 
 
 def read_manifest(directory: Path) -> dict | None:
@@ -58,11 +62,14 @@ def status(directory: Path) -> tuple[bool, str]:
                   f"'{manifest['cpu']}', built in {manifest['seconds']:.0f} s")
 
 
-def warm_up(env_id: str, position: int = 0) -> None:
-    """Build and step every configuration of ``env_id`` whose kernels a user, the main job or the tests compile."""
+def warm_up(env_id: str, report=lambda message: None) -> None:
+    """Build and step every configuration of ``env_id`` whose kernels a user, the main job or the tests compile.
+
+    ``report`` hears ``total <n>`` first, then ``done`` after each of the n steps; a worker prints them
+    (after :data:`_PROGRESS`) for the parent, whose one progress bar counts the steps of every worker.
+    """
     import gymnasium as gym
     import numpy as np
-    from tqdm.auto import tqdm
 
     import continuum_gym  # noqa: F401  (registers the ids)
     from continuum_gym.envs.spec import get_spec
@@ -72,24 +79,19 @@ def warm_up(env_id: str, position: int = 0) -> None:
     config = spec.config_class
     work = [{"task": task, "task_split": "test" if task in config.test_only_tasks else "train", "base_controller": base}
             for base in (*spec.baselines, None) for task in config.builtin_tasks]
-    name = env_id.split("/")[-1]
-    bar = tqdm(total=len(work) + 3, desc=f"precompile {name}", position=position, leave=True)
+    report(f"total {len(work) + 3}")  # the single envs, two vector envs, the library
     for kwargs in work:
-        bar.set_postfix_str(f"{kwargs['task']}, {kwargs['base_controller']}")
         _step_twice(gym.make(env_id, **kwargs))
-        bar.update()
+        report("done")
     for num_threads in (1, 2):
-        bar.set_postfix_str(f"vector env, {num_threads} thread(s)")
         _step_twice(gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads))
-        bar.update()
-    bar.set_postfix_str("library and reproduction")
+        report("done")
     for part in LIBRARY_WARM_UPS.get(env_id, ()):
         part()
     if env_id == _env_ids()[-1]:  # the overlap ratio's public entry points, once
         overlap_ratio(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))  # one pair, then a batch
         overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
-    bar.update()
-    bar.close()
+    report("done")
 
 
 def _step_twice(env) -> None:
@@ -134,7 +136,8 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
     """Compile into a fresh directory beside ``out`` and move it into place; return the manifest.
 
     One worker process per environment, run at once (each writes its own layer of the set), so the
-    build takes about as long as the slowest environment's first compile.
+    build takes about as long as the slowest environment's first compile. One progress bar (on a
+    terminal) counts the steps of every worker; a line says when each environment is done.
     """
     from continuum_gym.robots.compiled import PORTABLE_CPU, source_digest
 
@@ -147,10 +150,8 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
         environ["NUMBA_CPU_NAME"] = PORTABLE_CPU
     start = time.perf_counter()
     try:
-        workers = [subprocess.Popen([sys.executable, "-m", "continuum_gym.cli", "precompile", _WORKER_FLAG, env_id,
-                                     "--position", str(index)], env=environ)
-                   for index, env_id in enumerate(env_ids or _env_ids())]
-        codes = [worker.wait() for worker in workers]
+        codes = _run_workers({env_id: [sys.executable, "-m", "continuum_gym.cli", "precompile", _WORKER_FLAG, env_id]
+                              for env_id in env_ids or _env_ids()}, environ, start)
         if any(codes):
             raise RuntimeError(f"continuum-gym precompile: a worker failed (exit codes {codes}); the previous set, "
                                "if any, is left as it was")
@@ -174,6 +175,54 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
     return manifest
 
 
+def _run_workers(commands: dict, environ: dict, start: float) -> list:
+    """Run the workers ({env id: command}) at once, their progress as one bar; return their exit codes."""
+    import queue
+    import threading
+
+    from tqdm.auto import tqdm
+
+    lines: queue.Queue = queue.Queue()
+
+    def relay(env_id, stream):  # a thread per worker: its pipe, if nobody read it, would fill and block it
+        for line in stream:
+            lines.put((env_id, line.rstrip("\n")))
+        stream.close()
+        lines.put((env_id, None))
+
+    workers = {env_id: subprocess.Popen(command, env=environ, stdout=subprocess.PIPE, text=True)
+               for env_id, command in commands.items()}
+    for env_id, worker in workers.items():
+        threading.Thread(target=relay, args=(env_id, worker.stdout), daemon=True).start()
+    print(f"continuum-gym precompile: compiling the kernels of {len(workers)} environment(s) in parallel "
+          "(a few minutes, once)", file=sys.stderr, flush=True)
+    # A bar redrawn in place reads well on a terminal only; in a log the line per environment says enough.
+    bar = tqdm(total=0, desc="precompile", bar_format=_BAR_FORMAT, disable=not sys.stderr.isatty())
+    running = list(workers)
+
+    def names(env_ids):
+        return ", ".join(env_id.split("/")[-1] for env_id in env_ids)
+
+    bar.set_postfix_str(f"running {names(running)}")
+    while running:
+        env_id, line = lines.get()
+        if line is None:  # the worker closed its stdout: it has finished
+            running.remove(env_id)
+            bar.set_postfix_str(f"running {names(running)}" if running else "")
+            if workers[env_id].wait() == 0:
+                tqdm.write(f"continuum-gym precompile: {names([env_id])} done after "
+                           f"{time.perf_counter() - start:.0f} s", file=sys.stderr)
+        elif not line.startswith(_PROGRESS):
+            tqdm.write(line)
+        elif line.split()[1] == "total":
+            bar.total += int(line.split()[2])
+            bar.refresh()
+        else:
+            bar.update()
+    bar.close()
+    return [worker.wait() for worker in workers.values()]
+
+
 def _host_cpu() -> str:
     import llvmlite.binding as llvm
 
@@ -185,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
         from continuum_gym.robots.compiled import writing_precompiled
 
         with writing_precompiled(layer=args.worker.split("/")[-1]):
-            warm_up(args.worker, args.position)
+            warm_up(args.worker, lambda message: print(_PROGRESS, message, flush=True))
         return 0
     from continuum_gym.robots.compiled import precompiled_dir
 

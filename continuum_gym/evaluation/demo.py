@@ -16,7 +16,7 @@ def _pose_line(name, p, R):
     from continuum_gym.robots import rotation_vector
 
     rotvec = rotation_vector(R)
-    return (f"  {name:<34s} p = [{p[0] * 1e3:8.3f} {p[1] * 1e3:8.3f} {p[2] * 1e3:8.3f}] mm   "
+    return (f"  {name:<38s} p = [{p[0] * 1e3:8.3f} {p[1] * 1e3:8.3f} {p[2] * 1e3:8.3f}] mm   "
             f"log R = [{rotvec[0]:7.4f} {rotvec[1]:7.4f} {rotvec[2]:7.4f}] rad")
 
 
@@ -69,7 +69,8 @@ def run(args) -> int:
     endo, davinci = ContinuumEndoscope(), DaVinciEndoscope()
 
     fig = plt.figure(figsize=(15, 11))
-    lines = ["Tip poses (world frame; paper 000: {w} at the channel exit; paper 001: {w} at the incision)"]
+    lines = ["Tip poses in demo.png, world frame (origin: the channel exit for the MBCR, the incision for paper 001): "
+             "position p in mm, orientation log R as a rotation vector in rad"]
 
     # (a) hold the pose: start and end of the projected gradient.
     ax = fig.add_subplot(2, 2, 1, projection="3d")

@@ -12,7 +12,7 @@ import torch
 
 from continuum_gym.cli import main
 from continuum_gym.evaluation import evaluate_policy
-from continuum_gym.evaluation.evaluate import MethodRun, evaluate_methods
+from continuum_gym.evaluation.evaluate import MethodRun, evaluate_methods, write_results
 from continuum_gym.evaluation.policies import (
     PolicyError,
     as_predictor,
@@ -148,6 +148,16 @@ def test_a_variant_gets_its_own_optimum_and_the_validation_split(tmp_path, monke
     assert len(cached) == 1
 
 
+def test_results_are_written_and_listed_once_when_json_names_the_same_file(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    out, summary, meta = tmp_path / "out", {VIEW: {"m": {"mean": 1.0}}}, {VIEW: {}}
+    for same in (out / "results.json", "out/results.json", "out/../out/results.json"):
+        assert write_results(out, summary, meta, ["# table"], same) == [out / "results.md", out / "results.json"]
+    elsewhere = tmp_path / "elsewhere.json"
+    assert write_results(out, summary, meta, ["# table"], elsewhere)[-1] == elsewhere
+    assert json.loads(elsewhere.read_text()) == json.loads((out / "results.json").read_text())
+
+
 def test_cli_evaluates_an_entry_point_policy_with_env_kwargs(tmp_path, monkeypatch, capsys):
     (tmp_path / "my_lab_policy.py").write_text(textwrap.dedent("""
         import numpy as np
@@ -160,9 +170,11 @@ def test_cli_evaluates_an_entry_point_policy_with_env_kwargs(tmp_path, monkeypat
     monkeypatch.syspath_prepend(str(tmp_path))
     out = tmp_path / "out"
     args = ["evaluate", "--env", VIEW, "--policy", "my_lab_policy:make_policy", "--name", "mine", "--episodes", "1",
-            "--grid", "2", "--policies", str(tmp_path), "--out", str(out), "--no-progress",
-            "--env-kwargs", json.dumps({"base_controller": "resolved_rate", "task": "random"})]
+            "--grid", "2", "--policies", str(tmp_path), "--out", str(out), "--no-progress", "--json",
+            str(out / "results.json"), "--env-kwargs", json.dumps({"base_controller": "resolved_rate", "task": "random"})]
     assert main(args) == 0
+    wrote = [line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote ")]
+    assert len(wrote) == len(set(wrote)) and f"wrote {out / 'results.json'}" in wrote  # --json as make demo passes it
     result = json.loads((out / "results.json").read_text())
     assert rows_equal(result[VIEW]["mine"], result[VIEW]["resolved_rate"])
     assert result["metadata"][VIEW]["ignored_env_kwargs"] == {"task": "random"}

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import importlib
+import io
 import json
 import os
 import pkgutil
+import re
 import subprocess
 import sys
 import textwrap
+import time
 
 import pytest
 from numba.core.registry import CPUDispatcher
@@ -162,3 +165,41 @@ def test_a_failed_build_leaves_the_previous_set_as_it_was(tmp_path):
         precompile.build(out, env_ids=["ContinuumGym/NoSuchEnv-v0"])  # the worker refuses the id
     assert (out / "layer" / "kernel.nbc").read_bytes() == b"previous"
     assert sorted(path.name for path in tmp_path.iterdir()) == ["set"]  # no half-built directory left
+
+
+# A stand-in for a precompile worker: its progress lines, a line of its own, its exit status.
+FAKE_WORKER = '''
+import sys
+marker, status = sys.argv[1], int(sys.argv[2])
+print(marker, "total 2", flush=True)
+print("a line of the worker's own", flush=True)
+print(marker, "done", flush=True)
+if status == 0:
+    print(marker, "done", flush=True)
+sys.exit(status)
+'''
+
+
+@pytest.mark.parametrize("terminal", [False, True])
+def test_the_workers_progress_is_one_bar_without_an_estimate(terminal, capsys, monkeypatch):
+    """Parallel workers feed one bar (a terminal only), with no rate or remaining time; a line per finished env."""
+    class Stderr(io.StringIO):
+        def isatty(self):
+            return terminal
+
+    stderr = Stderr()
+    monkeypatch.setattr(sys, "stderr", stderr)
+    commands = {f"ContinuumGym/Toy{k}-v0": [sys.executable, "-c", FAKE_WORKER, precompile._PROGRESS, str(status)]
+                for k, status in enumerate((0, 0, 3))}
+    codes = precompile._run_workers(commands, dict(os.environ), time.perf_counter())
+    assert codes == [0, 0, 3]
+    err, out = stderr.getvalue(), capsys.readouterr().out
+    assert out.count("a line of the worker's own") == 3 and precompile._PROGRESS not in out + err
+    for name, lines in (("Toy0-v0", 1), ("Toy1-v0", 1), ("Toy2-v0", 0)):  # the failed worker is not "done"
+        assert err.count(f"continuum-gym precompile: {name} done after") == lines
+    assert "\x1b[A" not in err  # no bar drawn above another: there is only one
+    assert not re.search(r"it/s|s/it|<\d", err)  # neither a rate nor a remaining time
+    if terminal:
+        assert "precompile: 100%" not in err and "5/6 steps" in err  # the steps of every worker, in one bar
+    else:
+        assert "steps" not in err  # a bar redrawn in place would garble a log
