@@ -219,8 +219,11 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         declared = getattr(policy, "observation_shape", None)
         try:
             if declared is not None and declared != core.single_observation_space.shape:
+                built = {k: v for k, v in kwargs.items() if k not in ("task", "task_split", "grid")}
                 raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
-                                  f"{core.single_observation_space.shape} (is --env-kwargs the env it was trained in?)")
+                                  f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
+                                  f"{core.config.to_dict().get('robot')}); pass the keywords it was trained with "
+                                  "(--env-kwargs, or its registered id with --import)")
             result = run_episodes(core, policy, np.arange(count), record=task_set.task == spec.trace_task)
         except PolicyError as error:
             failed.add(name)
