@@ -322,3 +322,21 @@ def test_datasets_and_renders_of_a_registered_id_are_of_its_variant(my_lab, tmp_
         create_dataset(MY_ID, "nope", episodes=1, root=tmp_path / "minari")
     assert main(["render", "--env", MY_ID, "--steps", "2", "--out", str(tmp_path / "still.png")]) == 0
     assert main(["render", "--env", MY_ID, "--steps", "2", "--task", "circle", "--out", str(tmp_path / "c.png")]) == 2
+
+
+def test_the_optimum_command_computes_a_registered_variants_own_ceiling(my_lab, tmp_path, monkeypatch):
+    import json
+
+    from continuum_gym.cli import main
+    from continuum_gym.evaluation.optimum.cache import load_optimum_cache
+    from continuum_gym.evaluation.optimum.occlusion import env_hold_test_optimum
+
+    monkeypatch.setenv("CONTINUUM_GYM_CACHE", str(tmp_path / "cache"))
+    path = tmp_path / "optimum.json"
+    assert main(["optimum", "--env", MY_ID, "--env-hold-tasks", "3", "--no-progress", "--json", str(path)]) == 0
+    got = json.loads(path.read_text())["hold_test"]["optimum_voi"]
+    config = gym.make(MY_ID).unwrapped.config
+    direct = env_hold_test_optimum(3, limits=config.limits, robot=my_lab.ROBOT, cone=my_lab.CONE, progress=False)
+    assert got == direct["optimum_voi"]
+    assert got != load_optimum_cache()["hold_test"]["optimum_voi"][:3]  # not the paper robot's ceiling
+    assert main(["optimum", "--env", MY_ID, "--task", "coverage"]) == 2
