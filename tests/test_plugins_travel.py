@@ -67,6 +67,17 @@ def _python(code: str, **env_changes) -> subprocess.CompletedProcess:
                           cwd=ROOT)
 
 
+def _steps_in_a_fresh_interpreter(make: str, reset: str, expected: np.ndarray, tmp_path: Path) -> None:
+    """The env built by the expression ``make`` in a new interpreter (no CONTINUUM_GYM_PLUGINS), after the
+    statement ``reset``, gives ``expected`` observations under zero actions."""
+    code = (f"import pickle, numpy as np, continuum_gym\nenv = {make}\n{reset}\n"
+            f"obs = [env.step(np.zeros(env.action_space.shape, dtype=np.float32))[0] for _ in range({len(expected)})]\n"
+            f"np.save({str(tmp_path / 'obs.npy')!r}, np.array(obs))\n")
+    result = _python(code, CONTINUUM_GYM_PLUGINS=None)
+    assert result.returncode == 0, result.stderr[-3000:]
+    np.testing.assert_array_equal(np.load(tmp_path / "obs.npy"), expected)
+
+
 def _zero_steps(env, n: int) -> np.ndarray:
     observations = []
     for _ in range(n):
@@ -121,12 +132,7 @@ def test_an_env_pickled_with_plugins_steps_identically_in_a_fresh_interpreter(my
     path.write_bytes(pickle.dumps(env))
     expected = _zero_steps(env, 3)
     # No CONTINUUM_GYM_PLUGINS: the pickle alone names the module to import.
-    code = (f"import pickle, numpy as np\nenv = pickle.loads(open({str(path)!r}, 'rb').read())\n"
-            "obs = [env.step(np.zeros(env.action_space.shape, dtype=np.float32))[0] for _ in range(3)]\n"
-            f"np.save({str(tmp_path / 'obs.npy')!r}, np.array(obs))\n")
-    result = _python(code, CONTINUUM_GYM_PLUGINS=None)
-    assert result.returncode == 0, result.stderr[-3000:]
-    np.testing.assert_array_equal(np.load(tmp_path / "obs.npy"), expected)
+    _steps_in_a_fresh_interpreter(f"pickle.loads(open({str(path)!r}, 'rb').read())", "", expected, tmp_path)
 
 
 def test_async_vector_env_spawn_workers_build_the_registered_id(my_lab):
@@ -208,14 +214,8 @@ def test_save_config_and_make_from_config_round_trip_a_recorded_task(my_lab, tmp
     # A fresh interpreter (only the folder of my_lab on its path) makes the same env from the two files.
     env.reset(seed=1, options={"task_id": 1})
     expected = _zero_steps(env, 4)
-    code = ("import numpy as np, continuum_gym\n"
-            f"env = continuum_gym.make_from_config({str(path)!r})\n"
-            "env.reset(seed=1, options={'task_id': 1})\n"
-            "obs = [env.step(np.zeros(6, dtype=np.float32))[0] for _ in range(4)]\n"
-            f"np.save({str(tmp_path / 'obs.npy')!r}, np.array(obs))\n")
-    result = _python(code, CONTINUUM_GYM_PLUGINS=None)
-    assert result.returncode == 0, result.stderr[-3000:]
-    np.testing.assert_array_equal(np.load(tmp_path / "obs.npy"), expected)
+    _steps_in_a_fresh_interpreter(f"continuum_gym.make_from_config({str(path)!r})",
+                                  "env.reset(seed=1, options={'task_id': 1})", expected, tmp_path)
 
 
 def test_config_files_refuse_what_they_cannot_rebuild(tmp_path):
