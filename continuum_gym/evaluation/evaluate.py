@@ -47,6 +47,7 @@ class MethodRun:
     policy: Any
     env_kwargs: dict
     source: str | None = None  #: the policy's file or entry point (named when it fails)
+    algo: str | None = None  #: the algorithm that trained it (``ppo``, ``sac``, ``td3``), if known
 
 
 def discover_policies(directory, skipped: dict | None = None) -> dict:
@@ -75,13 +76,27 @@ def discover_policies(directory, skipped: dict | None = None) -> dict:
             skipped[str(run)] = str(error).splitlines()[0]
             print(f"continuum-gym evaluate: skipping {run}: {skipped[str(run)]}", file=sys.stderr)
             continue
-        base = config.get("base_controller")
-        method = f"residual_{base}" if base else "pure_rl"
+        method = method_name(config.get("base_controller"), config.get("algo"))
         found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
     if not found and not skipped:
         print(f"continuum-gym evaluate: warning: --policies {directory} holds no trained run (config.yml + "
               "model.zip); evaluating the baselines only", file=sys.stderr)
     return found
+
+
+def _sb3_algo(policy: Any) -> str | None:
+    """``ppo``, ``sac`` or ``td3`` for a stable-baselines3 model of those classes, else None."""
+    name = type(policy).__name__.lower()
+    return name if name in ("ppo", "sac", "td3") and hasattr(policy, "predict") else None
+
+
+def method_name(base: str | None, algo: str | None) -> str:
+    """A learned method's row: ``residual_<base>`` / ``pure_rl`` for PPO (the headline rows), else with
+    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``)."""
+    from continuum_gym.plugins import split_reference
+
+    name = f"residual_{split_reference(base)[1]}" if base else "pure_rl"
+    return name if algo in (None, "ppo") else f"{name}_{algo}"
 
 
 def load_policy(run: Path):
@@ -172,7 +187,8 @@ def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict, env_id: str
         for run in runs:
             try:
                 model, config = load_policy(run)
-                entries.append(MethodRun(model, policy_env_kwargs(spec, config), str(Path(run) / "model.zip")))
+                entries.append(MethodRun(model, policy_env_kwargs(spec, config), str(Path(run) / "model.zip"),
+                                         config.get("algo")))
             except Exception as error:  # noqa: BLE001 - any broken run is reported and skipped, the rest runs
                 skipped[str(run)] = f"{type(error).__name__}: {error}"
                 print(f"continuum-gym evaluate: skipping {run}: {error}", file=sys.stderr)
@@ -259,14 +275,17 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     check_sizes(episodes, grid)
     # A user's registered id: its keywords define the env (robot, cone, ...) and its base, as gym.make's.
     environment, policy_kwargs, ignored = split_env_kwargs(spec, {**registered_kwargs(env_id), **(env_kwargs or {})})
-    extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}, run.source) for run in runs])
-             for name, runs in extra]
+    extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}, run.source,
+                               run.algo or _sb3_algo(run.policy)) for run in runs]) for name, runs in extra]
     skipped: dict = {}
     learned = discovered_methods(spec, policies or {}, skipped, env_id) + extra
     methods = baseline_methods(spec, own_bases(spec, env_id, learned)) + learned
     results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
     table = aggregate(env_id, results, optimum, grid, trained_bases(methods))
+    for name, runs in learned:  # which algorithm, and over how many seeds, beside a learned row's metrics
+        if name in table:
+            table[name].update(algo=runs[0].algo, n_seeds=len(runs))
     described = {name: {"runs": len(runs), "env_kwargs": [run.env_kwargs for run in runs]} for name, runs in methods}
     meta = metadata(spec, split, episodes, grid, environment, ignored, described)
     meta["skipped"] = skipped

@@ -114,9 +114,9 @@ def draw_coverage_maps(spec: EnvSpec, results: dict, table: dict, path: Path) ->
     return path
 
 
-def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path) -> Path | None:
-    """Held-out headline metric against environment steps, one line per shipped run."""
-    curves = [(method, run) for method, runs in policies.get(spec.env_id, {}).items() for run in runs
+def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path, env_id: str | None = None) -> Path | None:
+    """Held-out headline metric against environment steps, one line per run of ``env_id`` (``spec``'s env)."""
+    curves = [(method, run) for method, runs in policies.get(env_id or spec.env_id, {}).items() for run in runs
               if (run / "evaluations.npz").exists()]
     if not curves:
         return None
@@ -138,9 +138,9 @@ def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path) -> Path | No
 def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path) -> list:
     """Every figure of one env into ``out``; returns the paths written."""
     spec = get_spec(env_id)
-    short = spec.short_name
+    short = env_id.split("/")[-1].rsplit("-v", 1)[0]  # a registered variant's figures carry its own name
     paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png"),
              draw_traces(spec, results, out / f"{short}_{spec.trace_task}_trace.png"),
              draw_coverage_maps(spec, results, table, out / f"{short}_coverage_maps.png"),
-             draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png")]
+             draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png", env_id)]
     return [path for path in paths if path is not None]

@@ -225,3 +225,28 @@ def test_unusable_runs_are_reported_and_skipped_and_an_empty_directory_warns(tmp
     (tmp_path / "nothing").mkdir()
     assert main(args + ["--policies", str(tmp_path / "nothing")]) == 0
     assert "holds no trained run" in capsys.readouterr().err
+
+
+def test_learned_rows_are_named_by_base_and_algorithm_and_say_how_many_seeds(tmp_path):
+    """PPO keeps the headline names; SAC and TD3 rows carry their algorithm; every learned row says it."""
+    import yaml
+
+    from continuum_gym.evaluation.evaluate import discover_policies, method_name
+
+    assert method_name("projected_gradient", "ppo") == "residual_projected_gradient"
+    assert method_name("my_lab.plugins:mylab_dls", "sac") == "residual_mylab_dls_sac"
+    assert method_name(None, "ppo") == "pure_rl" and method_name(None, "td3") == "pure_rl_td3"
+    runs = {"a": ("dimension_reduced", "ppo"), "b": ("dimension_reduced", "sac"), "c": ("dimension_reduced", "sac"),
+            "d": (None, "sac")}
+    for name, (base, algo) in runs.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.yml").write_text(yaml.safe_dump(
+            {"env_id": "ContinuumGym/ViewTracking-v0", "algo": algo, "base_controller": base}))
+        (tmp_path / name / "model.zip").write_bytes(b"")
+    found = discover_policies(tmp_path)["ContinuumGym/ViewTracking-v0"]
+    assert {method: len(paths) for method, paths in found.items()} == {
+        "residual_dimension_reduced": 1, "residual_dimension_reduced_sac": 2, "pure_rl_sac": 1}
+    table = evaluate_policy(lambda obs: np.zeros((obs.shape[0], 6)), "ContinuumGym/ViewTracking-v0", name="zero",
+                            episodes=1, grid=2, split="validation", progress=False)
+    assert table["zero"]["n_seeds"] == 1 and table["zero"]["algo"] is None
+    assert "n_seeds" not in table["dimension_reduced"]  # an analytic baseline is no learned row
