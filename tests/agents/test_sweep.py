@@ -114,23 +114,33 @@ def test_killed_trial_resumes_from_its_checkpoint(tmp_path, files):
     assert curve["timesteps"][-1] == final
 
 
-def _ray_trial_workers() -> list[int]:
-    """Pids of Ray worker processes running a trial (their title is ``ray::ImplicitFunc...``)."""
+def _ray_trial_workers(root: int) -> list[int]:
+    """Pids of the Ray worker processes running a trial (title ``ray::ImplicitFunc...``) that descend from
+    process ``root``: only this test's sweep, never another Ray job on the machine (a user's campaign)."""
     from pathlib import Path
 
-    pids = []
+    parents, titles = {}, {}
     for proc in Path("/proc").iterdir():
         if proc.name.isdigit():
             try:
-                title = (proc / "cmdline").read_bytes().split(b"\0")[0]
+                titles[int(proc.name)] = (proc / "cmdline").read_bytes().split(b"\0")[0]
+                stat = (proc / "stat").read_text()
             except OSError:
                 continue
-            if title.startswith(b"ray::ImplicitFunc"):
-                pids.append(int(proc.name))
-    return pids
+            parents[int(proc.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+
+    def descends(pid: int) -> bool:
+        for _ in range(64):
+            if pid == root:
+                return True
+            if pid not in parents or pid <= 1:
+                return False
+            pid = parents[pid]
+        return False
+
+    return [pid for pid, title in titles.items() if title.startswith(b"ray::ImplicitFunc") and descends(pid)]
 
 
-@pytest.mark.slow
 def test_a_sweep_whose_trial_worker_is_killed_resumes_the_trial_from_its_checkpoint(tmp_path, files):
     """Ray's FailureConfig path: SIGKILL the trial's worker process mid-training; Tune restarts the
     trial, which resumes from its newest checkpoint unit and finishes; the sweep exits 0."""
@@ -150,7 +160,7 @@ def test_a_sweep_whose_trial_worker_is_killed_resumes_the_trial_from_its_checkpo
             break
         time.sleep(0.2)
     assert folder is not None, "the trial never wrote a checkpoint"
-    workers = _ray_trial_workers()
+    workers = _ray_trial_workers(sweep.pid)
     assert workers, "no Ray trial worker found"
     killed_at = find_resumable(folder / "checkpoints")[0].step
     for pid in workers:
