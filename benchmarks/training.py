@@ -193,7 +193,7 @@ def run_thread_case(algo: str, env_id: str, torch_threads: int, runs: int, quick
 
 
 def configs_section(envs, quick: bool, results: dict, steps: int | None = None) -> None:
-    from continuum_gym.agents.train import HYPERPARAMS_DIR
+    from continuum_gym.agents.run_inputs import HYPERPARAMS_DIR
 
     rows = []
     for env_id in envs:

@@ -13,13 +13,21 @@ from __future__ import annotations
 
 import inspect
 import math
+import sys
 import types
 import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import yaml
+
+from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.validation import closest
+
+#: The packaged hyperparameter files, ``<algo>.yml``: one block per env id.
+HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
+_NOTED: set = set()  # (hyperparameter file, env id) pairs whose fallback block was announced
 
 # Run keys: read by the trainer, never passed to the algorithm. Expectations are in ``_RUN_RULES``.
 RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
@@ -315,3 +323,41 @@ def output_directory(name: str, out) -> Path:
                 raise ValueError(f"{name} must be a directory; {str(parent)!r} is an existing file{given}")
             break
     return path
+
+
+def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
+    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``."""
+    path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
+    if not path.is_file():
+        raise ValueError(f"--hyperparams: no file {str(path)!r}" + (" (it is a directory)" if path.is_dir() else ""))
+    try:
+        table = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise ValueError(f"{path} is not valid YAML ({getattr(error, 'problem', None) or error}{where})") from None
+    if table is None:
+        raise ValueError(f"{path} is empty; expected a mapping of env id to a block of hyperparameters")
+    if not isinstance(table, dict):
+        raise ValueError(f"{path} must map env ids to blocks of hyperparameters; got a {type(table).__name__}")
+    key = env_id
+    if env_id not in table:
+        blocks = sorted(str(k) for k in table if k != "default")
+        base_id = get_spec(env_id).env_id
+        if base_id == env_id or base_id not in table:
+            raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
+        key = base_id  # a user's registered id trains with its library env's block
+    block = table[key]
+    if not isinstance(block, dict):
+        raise ValueError(f"{path}: the block for {key!r} must be a mapping of hyperparameters; got {block!r}")
+    block = dict(block)
+    if key != env_id:
+        registered = registered_kwargs(env_id)
+        kept = {k: v for k, v in dict(block.get("env_kwargs") or {}).items() if k not in registered}
+        block["env_kwargs"] = kept
+        if (str(path), env_id) not in _NOTED:  # said once per process, however often the block is read
+            _NOTED.add((str(path), env_id))
+            print(f"note: {path.name} has no block for {env_id!r}; using the block of {key!r}, with the env keywords "
+                  f"{env_id!r} was registered with taking precedence (your own: --hyperparams FILE; the format is in "
+                  "docs/configure.md)", file=sys.stderr)
+    return block

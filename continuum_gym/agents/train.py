@@ -39,6 +39,7 @@ from continuum_gym.agents.run_inputs import (
     SCHEDULE_KEYS,
     check_combination,
     check_hyperparams,
+    load_hyperparams,
     output_directory,
     schedule_initial,
     seed_number,
@@ -52,13 +53,9 @@ from continuum_gym.evaluation.io import (
 )
 
 ALGOS = ("ppo", "sac", "td3")
-HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
 # Values of the run keys when a block leaves them out.
 RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000, "n_eval_episodes": 16,
                 "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2, "normalize_reward": False}
-
-
-_NOTED: set = set()  # (hyperparameter file, env id) pairs whose fallback block was announced
 
 
 class RunBusyError(RuntimeError):
@@ -68,44 +65,6 @@ class RunBusyError(RuntimeError):
 def run_name(env_id: str, algo: str, base, seed: int) -> str:
     short = env_id.split("/")[-1].split("-")[0]
     return f"{short}_{algo}_{base or 'pure_rl'}_seed{seed}"
-
-
-def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
-    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``."""
-    path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
-    if not path.is_file():
-        raise ValueError(f"--hyperparams: no file {str(path)!r}" + (" (it is a directory)" if path.is_dir() else ""))
-    try:
-        table = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ValueError(f"{path} is not valid YAML ({getattr(error, 'problem', None) or error}{where})") from None
-    if table is None:
-        raise ValueError(f"{path} is empty; expected a mapping of env id to a block of hyperparameters")
-    if not isinstance(table, dict):
-        raise ValueError(f"{path} must map env ids to blocks of hyperparameters; got a {type(table).__name__}")
-    key = env_id
-    if env_id not in table:
-        blocks = sorted(str(k) for k in table if k != "default")
-        base_id = get_spec(env_id).env_id
-        if base_id == env_id or base_id not in table:
-            raise ValueError(f"{path.name} has no block for {env_id!r}; blocks: {blocks}")
-        key = base_id  # a user's registered id trains with its library env's block
-    block = table[key]
-    if not isinstance(block, dict):
-        raise ValueError(f"{path}: the block for {key!r} must be a mapping of hyperparameters; got {block!r}")
-    block = dict(block)
-    if key != env_id:
-        registered = registered_kwargs(env_id)
-        kept = {k: v for k, v in dict(block.get("env_kwargs") or {}).items() if k not in registered}
-        block["env_kwargs"] = kept
-        if (str(path), env_id) not in _NOTED:  # said once per process, however often the block is read
-            _NOTED.add((str(path), env_id))
-            print(f"note: {path.name} has no block for {env_id!r}; using the block of {key!r}, with the env keywords "
-                  f"{env_id!r} was registered with taking precedence (your own: --hyperparams FILE; the format is in "
-                  "docs/configure.md)", file=sys.stderr)
-    return block
 
 
 def resolve_hyperparams(algo: str, env_id: str, path=None) -> dict:

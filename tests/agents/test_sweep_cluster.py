@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from continuum_gym.agents import cluster as cluster_module
 from continuum_gym.agents import sweep as sweep_module
 from continuum_gym.cli import main
 
@@ -183,5 +184,5 @@ def test_the_trials_runtime_env_carries_the_plugin_modules_and_their_path(monkey
     env_vars = sweep_module.trial_runtime_env()["env_vars"]
     assert env_vars["CONTINUUM_GYM_PLUGINS"] == "my_lab.plugins,other.mod"
     assert env_vars["PYTHONPATH"] == os.pathsep.join(["/labs/code", "${PYTHONPATH}"])  # ahead of the node's own
-    assert sweep_module._host_port("ray://head:10001") == ("head", 10001)
-    assert sweep_module._host_port("auto") is None
+    assert cluster_module._host_port("ray://head:10001") == ("head", 10001)
+    assert cluster_module._host_port("auto") is None
