@@ -31,9 +31,7 @@ _DAVINCI_FIELDS = ("times", "configurations")
 def _config_and_id(env: Any):
     """The ``EnvConfig`` of any front end (single, vector, SB3, goal, wrapped) and the id it was made as."""
     inner = getattr(env, "unwrapped", env)
-    config = getattr(inner, "config", None)
-    if config is None and hasattr(inner, "core"):
-        config = inner.core.config
+    config = getattr(inner, "config", None)  # every front end has it (envs.single.CoreOwner, the goal envs)
     if config is None:
         raise ValueError(f"env must be a continuum-gym environment (single, vector, SB3 or goal); got {describe(env)}")
     spec = getattr(env, "spec", None) or getattr(inner, "spec", None)
