@@ -20,10 +20,12 @@ Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):
   ``LensCone.kernel_args()``, ``dt`` the substep (s).
 - ViewTracking controller: ``rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,), out (6,))
   -> None``; ``robot`` is ``ContinuumEndoscope.kernel_args()``.
-- Reward term (compiled): ``term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), params (m,))
-  -> float64``, with the env's metric and flag columns (``METRIC_*``, ``FLAG_*`` of its kernel module).
-- Reward term (numpy, ``compiled=False``): ``fn(metrics: dict[str, (N,) array], actions (N, k)) -> (N,)``,
-  metrics named as in ``info``; applied once per batch step.
+- Reward term (compiled): ``term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,),
+  params (m,)) -> float64``, with the env's metric and flag columns (``METRIC_*``, ``FLAG_*`` of its kernel
+  module) and the joint rates the robot applied over the step (base and residual, after rate and joint
+  limits; the action's index layout). ``term(metrics, flags, action, params)`` (no rates) works too.
+- Reward term (numpy, ``compiled=False``): ``fn(metrics: dict[str, (N,) array], actions (N, k), rates (N, k))
+  -> (N,)`` (``rates`` optional), metrics named as in ``info``; applied once per batch step.
 
 Every entry point checks its input and raises ``ValueError`` naming the parameter and the valid range.
 
@@ -75,6 +77,10 @@ class RewardTerm:
     weight: float
     compiled: bool
     params: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: What the step calls: ``fn`` itself, or a compiled ``fn`` without ``rates`` wrapped into the signature.
+    call: Any = field(default=None, repr=False, compare=False)
+    #: Whether the numpy ``fn`` takes the applied rates (its third argument).
+    with_rates: bool = True
 
 
 ROBOTS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
@@ -202,10 +208,14 @@ def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float =
                          params: Sequence[float] = (), replace: bool = False) -> RewardTerm:
     """A named reward term, added (times ``weight``) to the reward of every env of ``env`` made afterwards.
 
-    ``compiled=True``: ``fn`` is a numba function of the compiled signature (runs per row inside the step);
-    ``compiled=False``: a batched numpy function of the per-step metrics (once per batch step).
+    ``compiled=True``: ``fn(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,), params (m,))
+    -> float``, a numba function run per row after the step; ``compiled=False``: ``fn(metrics: dict of (N,)
+    arrays, actions (N, k), rates (N, k)) -> (N,)``, a batched numpy function (once per batch step).
+    ``rates`` are the joint rates the robot applied over the step, base and residual together, after rate
+    limits and joint limits (rad/s, m/s for insertion; OcclusionAvoidance adds the endoscope's rotation
+    rate last), in the action's index layout; both signatures may leave ``rates`` out.
     """
-    from continuum_gym.envs.custom import check_reward_term
+    from continuum_gym.envs.custom import check_reward_term, takes_rates
     from continuum_gym.envs.spec import get_spec
 
     env = _env(env)
@@ -215,8 +225,9 @@ def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float =
     name = _name(name, REWARD_TERMS[env], "registered reward term", replace)
     weight = number(weight, "weight", low=0.0, high=1e6)
     params = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
-    term = RewardTerm(name, env, fn, weight, bool(compiled), params)
-    check_reward_term(term)
+    call = check_reward_term(RewardTerm(name, env, fn, weight, bool(compiled), params))
+    term = RewardTerm(name, env, fn, weight, bool(compiled), params, call=call,
+                      with_rates=bool(compiled) or takes_rates(fn, 2))
     REWARD_TERMS[env][name] = term
     _record("reward term", env, name, plugins.caller_origin())
     return term

@@ -16,6 +16,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from continuum_gym.envs import NamedRewardTerms
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 BASE = "ContinuumGym/OcclusionAvoidance-v0"
@@ -138,6 +140,7 @@ def test_an_env_pickled_with_plugins_steps_identically_in_a_fresh_interpreter(my
 def test_async_vector_env_spawn_workers_build_the_registered_id(my_lab):
     sync = gym.make_vec(MY_ID, num_envs=2, vectorization_mode="sync")
     spawned = gym.make_vec(MY_ID, num_envs=2, vectorization_mode="async", vector_kwargs={"context": "spawn"})
+    native = gym.make_vec(MY_ID, num_envs=2, vectorization_mode="vector_entry_point")
     try:
         np.testing.assert_array_equal(spawned.reset(seed=5)[0], sync.reset(seed=5)[0])
         zeros = np.zeros((2, 6), dtype=np.float32)
@@ -145,9 +148,20 @@ def test_async_vector_env_spawn_workers_build_the_registered_id(my_lab):
             got, want = spawned.step(zeros), sync.step(zeros)
             np.testing.assert_array_equal(got[0], want[0])
             np.testing.assert_array_equal(got[1], want[1])
+        # Gymnasium stacks info["reward_terms"] into a plain array; the wrapper gives it its names back,
+        # the same names and values as the library's own vector env.
+        assert not hasattr(got[4]["reward_terms"], "names")
+        named = NamedRewardTerms(spawned)
+        named.reset(seed=5)
+        native.reset(seed=5)
+        terms, expected = named.step(zeros)[4]["reward_terms"], native.step(zeros)[4]["reward_terms"]
+        assert terms.names == expected.names and "mylab_tip_mm" in terms.names
+        np.testing.assert_array_equal(terms["mylab_tip_mm"], expected["mylab_tip_mm"])
+        np.testing.assert_array_equal(np.asarray(terms), np.asarray(expected))
     finally:
         spawned.close()
         sync.close()
+        native.close()
 
 
 def test_sb3_subproc_vec_env_workers_build_the_registered_id(my_lab):

@@ -8,6 +8,7 @@ False, no terms) costs one branch per step and leaves the built-in arithmetic un
 
 from __future__ import annotations
 
+import inspect
 from collections import namedtuple
 from collections.abc import Sequence
 
@@ -31,7 +32,8 @@ _I64 = types.int64[::1]
 OCCLUSION_RATES_DOC = ("rates(q (dof,), gamma, p_des (3,), R_des (3, 3), v_des (3,), dt, robot, cone, params (m,), "
                        "out (dof + 1,)) -> None")
 VIEW_RATES_DOC = "rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,), out (6,)) -> None"
-TERM_DOC = "term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), params (m,)) -> float64"
+TERM_DOC = ("term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,), params (m,)) -> float64 "
+            "(or, without rates, term(metrics, flags, action, params))")
 
 
 def _paper_args(env_id: str):
@@ -57,7 +59,35 @@ def rates_signature(env_id: str):
 
 
 def term_signature():
-    return types.float64(_F64, _I64, _F64, _F64)
+    return types.float64(_F64, _I64, _F64, _F64, _F64)
+
+
+def _positional_count(fn) -> int | None:
+    """How many positional arguments ``fn`` takes (None: any number, or not inspectable)."""
+    try:
+        parameters = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    if any(p.kind is p.VAR_POSITIONAL for p in parameters):
+        return None
+    return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in parameters)
+
+
+def takes_rates(fn, without: int) -> bool:
+    """Whether a reward term's function takes the applied rates: one positional argument more than ``without``."""
+    count = _positional_count(getattr(fn, "py_func", fn))
+    return count is None or count > without
+
+
+def _with_rates(fn):
+    """A compiled term of the older signature (no rates) as one of today's: the step calls one signature."""
+    from numba import njit
+
+    @njit
+    def term(metrics, flags, action, rates, params):
+        return fn(metrics, flags, action, params)
+
+    return term
 
 
 def _compiled(fn, signature, what: str, doc: str):
@@ -99,13 +129,18 @@ def check_controller(controller) -> None:
                          f"configuration it wrote {out.tolist()}")
 
 
-def check_reward_term(term) -> None:
-    """Compile a compiled term for its signature, or check that a numpy term is callable."""
+def check_reward_term(term):
+    """The function the step calls for ``term``: a compiled term compiled for today's signature (one of the
+    older signature, without ``rates``, wrapped into it), or a numpy term checked to be callable."""
     if term.compiled:
-        _compiled(term.fn, term_signature(), "fn", TERM_DOC)
-    elif not callable(term.fn):
-        raise ValueError(f"fn must be callable as fn(metrics: dict of (N,) arrays, actions (N, k)) -> (N,); got "
-                         f"{describe(term.fn)}")
+        if not isinstance(term.fn, CPUDispatcher):
+            raise ValueError(f"fn must be a numba.njit function {TERM_DOC}; got {describe(term.fn)}")
+        fn = term.fn if takes_rates(term.fn, 4) else _with_rates(term.fn)
+        return _compiled(fn, term_signature(), "fn", TERM_DOC)
+    if not callable(term.fn):
+        raise ValueError(f"fn must be callable as fn(metrics: dict of (N,) arrays, actions (N, k), rates (N, k)) -> "
+                         f"(N,) (rates optional); got {describe(term.fn)}")
+    return term.fn
 
 
 def controller_slot(env_id: str, controller=None) -> ControllerSlot | None:
@@ -128,7 +163,7 @@ def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
     fns = List.empty_list(types.FunctionType(term_signature()))
     params = List.empty_list(_F64)
     for term in terms:
-        fns.append(term.fn)
+        fns.append(term.call)
         params.append(np.ascontiguousarray(term.params, dtype=np.float64))
     return RewardSlot(fns, params, np.array(list(weights), dtype=np.float64))
 
@@ -148,26 +183,18 @@ def view_slot_rates(custom, q, p_target, R_target, dt, robot, out):
 
 
 @kernel
-def add_reward_terms(i, slot, metrics, flags, actions, terms, first):
-    """terms[i, first + k] = w_k fn_k(metrics[i], flags[i], actions[i], params_k); returns their sum."""
-    total = 0.0
-    for k in range(len(slot.fns)):
-        value = slot.weights[k] * slot.fns[k](metrics[i], flags[i], actions[i], slot.params[k])
-        terms[i, first + k] = value
-        total += value
-    return total
-
-
-@kernel(inline="always")
-def row_reward(i, terms, n_builtin, slot, metrics, flags, actions):
-    """Row ``i``'s reward: the sum of its ``n_builtin`` built-in terms, plus the registered compiled terms
-    of ``slot`` (written after them into ``terms``; ``slot`` None: none registered, the branch is pruned)."""
-    total = 0.0
-    for k in range(n_builtin):
-        total += terms[i, k]
-    if slot is not None:
-        total += add_reward_terms(i, slot, metrics, flags, actions, terms, n_builtin)
-    return total
+def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewards, first):
+    """For each row that stepped (``active`` 1): terms[i, first + k] = w_k fn_k(metrics[i], flags[i], actions[i],
+    rates[i], params_k), added to rewards[i] after its built-in terms (the sum the step kernel wrote)."""
+    for i in range(active.shape[0]):
+        if active[i] != 1:
+            continue
+        total = 0.0
+        for k in range(len(slot.fns)):
+            value = slot.weights[k] * slot.fns[k](metrics[i], flags[i], actions[i], rates[i], slot.params[k])
+            terms[i, first + k] = value
+            total += value
+        rewards[i] += total
 
 
 def controller_predict(controller, observation) -> np.ndarray:

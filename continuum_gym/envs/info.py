@@ -288,3 +288,4 @@ class RewardTerms(np.ndarray):
     def as_dict(self) -> dict:
         """A plain ``{term: value}`` dict (e.g. for JSON)."""
         return dict(self.items())
+

@@ -153,6 +153,13 @@ class OcclusionCore(BatchedCore):
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params
 
+    def joint_values(self) -> np.ndarray:
+        """Every row's joints and, last, the endoscope's rotation gamma (N, dof + 1): the action's layout."""
+        return np.concatenate([self.q, self.gamma[:, None]], axis=1)
+
+    #: gamma, the last column, is an angle on the circle.
+    circular_joint_columns = (-1,)
+
     # ------------------------------------------------------------------ state
     def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)

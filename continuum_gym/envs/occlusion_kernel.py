@@ -32,7 +32,7 @@ from continuum_gym.envs.common_kernels import (
     desired_point,
     desired_rotation,
 )
-from continuum_gym.envs.custom import occlusion_slot_rates, row_reward
+from continuum_gym.envs.custom import occlusion_slot_rates
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
@@ -237,7 +237,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
-def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work):
+def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
     ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
@@ -358,11 +358,14 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_
     flags[i, FLAG_BASE_FROZEN] = base_frozen
     flags[i, FLAG_BASE_SATURATED] = base_saturated
     flags[i, FLAG_GUARDED] = guarded
-    out.rewards[i] = row_reward(i, terms, N_TERMS_REWARD, terms_slot, metrics, flags, actions)
+    total = 0.0
+    for k in range(N_TERMS_REWARD):
+        total += terms[i, k]
+    out.rewards[i] = total
 
 
 @kernel(nogil=True)
-def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, terms_slot, out, claims, start,
+def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, out, claims, start,
                          stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
     ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).
@@ -380,7 +383,7 @@ def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom,
             if mode == OBSERVE_ONLY:
                 occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
             elif mode != 0:
-                occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, terms_slot, out, work)
+                occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work)
         first, last = next_rows(claims, start, stop, first, last)
 
 

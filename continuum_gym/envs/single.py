@@ -52,6 +52,11 @@ class CoreOwner:
         """The env's ``EnvConfig`` (every keyword, validated; ``continuum_gym.save_config`` writes it)."""
         return self.core.config
 
+    @property
+    def reward_names(self) -> tuple[str, ...]:
+        """Names of the weighted reward terms, in ``info["reward_terms"]`` column order."""
+        return tuple(self.core.reward_names)
+
 
 class SceneOwner(CoreOwner):
     """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""

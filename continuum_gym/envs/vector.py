@@ -23,9 +23,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.utils import seeding
-from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.envs.info import RewardTerms
 from continuum_gym.envs.single import (
     SceneOwner,
     check_render_arguments,
@@ -204,4 +205,36 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self.close_scene()
 
 
-__all__ = ["ContinuumVectorEnv", "row_generators", "autoreset_mode_of", "VECTOR_RESET_OPTIONS"]
+class NamedRewardTerms(VectorWrapper):
+    """Gives ``info["reward_terms"]`` back its term names behind Gymnasium's ``AsyncVectorEnv`` and
+    ``SyncVectorEnv`` of single envs, which stack every info array into a plain (N, n_terms) array.
+
+        envs = NamedRewardTerms(gym.make_vec(env_id, num_envs=8, vectorization_mode="async"))
+        _, _, _, _, infos = envs.step(actions)
+        infos["reward_terms"]["voi"]      # (8,), as from the library's own vector env
+
+    The names are asked of the first worker once (``get_attr("reward_names")``): the workers of one
+    vector env are made from the same id and keywords, so they share them.
+    """
+
+    _names: tuple[str, ...] | None = None
+
+    def _named(self, infos: dict) -> dict:
+        terms = infos.get("reward_terms")
+        if terms is None or isinstance(terms, RewardTerms):
+            return infos
+        if self._names is None:
+            self._names = tuple(self.env.get_attr("reward_names")[0])
+        infos["reward_terms"] = RewardTerms(terms, self._names)
+        return infos
+
+    def step(self, actions):
+        obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        return obs, rewards, terminated, truncated, self._named(infos)
+
+    def reset(self, *, seed=None, options=None):
+        obs, infos = self.env.reset(seed=seed, options=options)
+        return obs, self._named(infos)
+
+
+__all__ = ["ContinuumVectorEnv", "NamedRewardTerms", "row_generators", "autoreset_mode_of", "VECTOR_RESET_OPTIONS"]

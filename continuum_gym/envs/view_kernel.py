@@ -25,7 +25,7 @@ from continuum_gym.baselines.view_tracking import (
     view_rates_kernel,
 )
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
-from continuum_gym.envs.custom import row_reward, view_slot_rates
+from continuum_gym.envs.custom import view_slot_rates
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.overlap import make_overlap_work
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
@@ -201,7 +201,7 @@ def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out,
 
 
 @kernel(inline="always")
-def finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, clamped, scale):
+def finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale):
     """Row i's reward terms, reward and flags after its observation."""
     metrics = out.metrics
     terms = out.terms
@@ -216,24 +216,27 @@ def finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, c
     flags[i, FLAG_RATE_SATURATED] = 1 if scale < 1.0 else 0
     flags[i, FLAG_TERMINATED] = 0 if math.isfinite(metrics[i, METRIC_POSITION_ERROR]) else 1
     flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
-    out.rewards[i] = row_reward(i, terms, N_REWARD_TERMS, terms_slot, metrics, flags, actions)
+    total = 0.0
+    for k in range(N_REWARD_TERMS):
+        total += terms[i, k]
+    out.rewards[i] = total
 
 
 @kernel(nogil=True)
-def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, claims,
+def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, claims,
                     start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
     marked ``OBSERVE_ONLY`` (releases the GIL; rows claimed from ``claims``: see occlusion_kernel)."""
     work = make_view_step_work()
     first, last = first_rows(claims, start, stop)
     while first < last:
-        view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work,
+        view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, work,
                        first, last)
         first, last = next_rows(claims, start, stop, first, last)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
-def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, terms_slot, out, work, start,
+def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, work, start,
                    stop):
     """``view_step_batch``'s loop on a given work: apart from its allocation, so that the rows run without
     reference counts (``kernel(borrows=True)``)."""
@@ -248,4 +251,4 @@ def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, 
                                                          work)
         view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
         if step:
-            finish_view_row(i, state, actions, tasks, env, terms_slot, out, action_sq, clamped, scale)
+            finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)

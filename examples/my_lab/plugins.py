@@ -39,7 +39,7 @@ def damped_least_squares(q, gamma, p_des, R_des, v_des, dt, robot, cone, params,
 
 
 @njit(cache=True)  # compiled once, reused by every process that imports this module
-def tip_error_mm(metrics, flags, action, params):
+def tip_error_mm(metrics, flags, action, rates, params):
     """Minus the tip error in mm, and a penalty when the episode ends on a lost tip."""
     return -1e3 * metrics[METRIC_TIP_ERROR] - params[0] * flags[FLAG_TERMINATED]
 
