@@ -197,8 +197,15 @@ def _run_workers(commands: dict, environ: dict, start: float) -> list:
     print(f"continuum-gym precompile: compiling the kernels of {len(workers)} environment(s) in parallel "
           "(a few minutes, once)", file=sys.stderr, flush=True)
     # A bar redrawn in place reads well on a terminal only; in a log the line per environment says enough.
-    bar = tqdm(total=0, desc="precompile", bar_format=_BAR_FORMAT, disable=not sys.stderr.isatty())
+    bar = tqdm(total=None, desc="precompile", bar_format=_BAR_FORMAT, disable=not sys.stderr.isatty())
     running = list(workers)
+    totals: dict = {}  # steps each worker announced; the bar's total is known only once every worker spoke
+
+    def announce(env_id, steps):
+        totals.setdefault(env_id, steps)
+        if len(totals) == len(workers):
+            bar.total = sum(totals.values())
+        bar.refresh()
 
     def names(env_ids):
         return ", ".join(env_id.split("/")[-1] for env_id in env_ids)
@@ -208,6 +215,7 @@ def _run_workers(commands: dict, environ: dict, start: float) -> list:
         env_id, line = lines.get()
         if line is None:  # the worker closed its stdout: it has finished
             running.remove(env_id)
+            announce(env_id, 0)  # a worker that died before announcing its steps has none left
             bar.set_postfix_str(f"running {names(running)}" if running else "")
             if workers[env_id].wait() == 0:
                 tqdm.write(f"continuum-gym precompile: {names([env_id])} done after "
@@ -215,8 +223,7 @@ def _run_workers(commands: dict, environ: dict, start: float) -> list:
         elif not line.startswith(_PROGRESS):
             tqdm.write(line)
         elif line.split()[1] == "total":
-            bar.total += int(line.split()[2])
-            bar.refresh()
+            announce(env_id, int(line.split()[2]))
         else:
             bar.update()
     bar.close()

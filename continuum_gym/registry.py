@@ -37,79 +37,30 @@ that module (``continuum_gym.plugins``). Anything registered at import of such a
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from continuum_gym import plugins
+from continuum_gym.envs.ids import OCCLUSION, VIEW
+from continuum_gym.envs.registered import (
+    TABLES,
+    CONTROLLERS,
+    ORIGINS,
+    REWARD_TERMS,
+    ROBOTS,
+    TASKS,
+    CustomController,
+    RewardTerm,
+    record,
+    controller_names,
+    origin_of,
+    reference_of,
+    resolve,
+    robot_names,
+)
 from continuum_gym.validation import closest, describe, number
-
-OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
-VIEW = "ContinuumGym/ViewTracking-v0"
 _NAME_HINT = "a non-empty string of letters, digits, '_' or '-'"
-
-
-@dataclass(frozen=True)
-class CustomController:
-    """A registered controller: its compiled rate function, parameters and an SB3-style ``predict``."""
-
-    name: str
-    env_id: str
-    rates: Any
-    params: np.ndarray
-    doc: str = ""
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
-        """SB3 ``predict`` on a controller observation dict (``core.controller_observation(row)``)."""
-        from continuum_gym.envs.custom import controller_predict
-
-        return controller_predict(self, observation), state
-
-
-@dataclass(frozen=True)
-class RewardTerm:
-    """A registered reward term: compiled (per row, inside the step) or batched numpy (after it)."""
-
-    name: str
-    env_id: str
-    fn: Any
-    weight: float
-    compiled: bool
-    params: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: What the step calls: ``fn`` itself, or a compiled ``fn`` without ``rates`` wrapped into the signature.
-    call: Any = field(default=None, repr=False, compare=False)
-    #: Whether the numpy ``fn`` takes the applied rates (its third argument).
-    with_rates: bool = True
-
-
-ROBOTS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
-TASKS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
-CONTROLLERS: dict[str, dict[str, CustomController]] = {OCCLUSION: {}, VIEW: {}}
-REWARD_TERMS: dict[str, dict[str, RewardTerm]] = {OCCLUSION: {}, VIEW: {}}
-#: The importable module each plug-in was registered from (None: __main__, a notebook), per env and name.
-ORIGINS: dict[str, dict[tuple[str, str], str | None]] = {OCCLUSION: {}, VIEW: {}}
-_TABLES = {"robot": ROBOTS, "task": TASKS, "controller": CONTROLLERS, "reward term": REWARD_TERMS}
-
-
-def _record(kind: str, env: str, name: str, origin: str | None) -> None:
-    ORIGINS[env][(kind, name)] = origin
-    plugins.remember(origin)
-
-
-def origin_of(kind: str, env: str, name: str) -> str | None:
-    """The module that registered the ``kind`` (robot, task, controller, reward term) ``name`` of ``env``."""
-    return ORIGINS.get(env, {}).get((kind, name))
-
-
-def reference_of(kind: str, env: str, name: str) -> str:
-    """``"module:name"`` for a plug-in registered at import of an importable module, else ``name``."""
-    return plugins.reference(name, origin_of(kind, env, name))
-
-
-def resolve(kind: str, env: str, value: str) -> str:
-    """The registered name that ``value`` (a name or ``"module:name"``) refers to, importing its module."""
-    return plugins.lookup(_TABLES[kind][env], value, f"{kind}", env)
 
 
 def _env(env: str) -> str:
@@ -140,11 +91,7 @@ def register_robot(name: str, robot, *, replace: bool = False) -> None:
     else:
         raise ValueError(f"robot must be a MultiBackboneRobot or a ContinuumEndoscope; got {describe(robot)}")
     ROBOTS[env][_name(name, ROBOTS[env], "registered robot", replace)] = robot
-    _record("robot", env, name, plugins.caller_origin())
-
-
-def robot_names(env_id: str) -> tuple:
-    return tuple(ROBOTS.get(env_id, {}))
+    record("robot", env, name, plugins.caller_origin())
 
 
 def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: int | None = None,
@@ -173,7 +120,7 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
     source = SampledTasks(_name(name, TASKS[env], "registered task", replace), sampler, kind, count)
     source.draw("train", 0)  # fails now, naming the problem, rather than at the first reset
     TASKS[env][name] = source
-    _record("task", env, name, plugins.caller_origin())
+    record("task", env, name, plugins.caller_origin())
 
 
 def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Sequence[float] = (), doc: str = "",
@@ -196,12 +143,8 @@ def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Seque
     controller = CustomController(name, env, rates, params, doc)
     check_controller(controller)
     CONTROLLERS[env][name] = controller
-    _record("controller", env, name, plugins.caller_origin())
+    record("controller", env, name, plugins.caller_origin())
     return controller
-
-
-def controller_names(env_id: str) -> tuple:
-    return tuple(CONTROLLERS.get(env_id, {}))
 
 
 def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float = 1.0, compiled: bool = True,
@@ -229,7 +172,7 @@ def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float =
     term = RewardTerm(name, env, fn, weight, bool(compiled), params, call=call,
                       with_rates=bool(compiled) or takes_rates(fn, 2))
     REWARD_TERMS[env][name] = term
-    _record("reward term", env, name, plugins.caller_origin())
+    record("reward term", env, name, plugins.caller_origin())
     return term
 
 
@@ -239,7 +182,7 @@ def unregister(name: str, env: str = OCCLUSION) -> None:
     for table in (ROBOTS, TASKS, CONTROLLERS, REWARD_TERMS):
         if name in table[env]:
             del table[env][name]
-            for key in [key for key in ORIGINS[env] if key[1] == name and table is _TABLES[key[0]]]:
+            for key in [key for key in ORIGINS[env] if key[1] == name and table is TABLES[key[0]]]:
                 del ORIGINS[env][key]
             return
     known = [*ROBOTS[env], *TASKS[env], *CONTROLLERS[env], *REWARD_TERMS[env]]
@@ -247,5 +190,5 @@ def unregister(name: str, env: str = OCCLUSION) -> None:
 
 
 __all__ = ["register_robot", "register_task", "register_controller", "register_reward_term", "unregister",
-           "origin_of", "reference_of", "resolve", "CustomController", "RewardTerm", "ROBOTS", "TASKS",
-           "CONTROLLERS", "REWARD_TERMS", "ORIGINS"]
+           "origin_of", "reference_of", "resolve", "robot_names", "controller_names", "CustomController", "RewardTerm",
+           "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS", "ORIGINS", "OCCLUSION", "VIEW"]

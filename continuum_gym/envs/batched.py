@@ -204,24 +204,24 @@ class BatchedCore:
 
     def _setup_rewards(self) -> None:
         """Reward names and slots: the built-in terms, then the registered compiled, then numpy terms."""
-        from continuum_gym import registry
+        from continuum_gym.envs import registered
 
-        registered = list(registry.REWARD_TERMS[self.spec.env_id].values())
-        self._compiled_terms = [t for t in registered if t.compiled]
-        self._numpy_terms = [t for t in registered if not t.compiled]
+        terms = list(registered.REWARD_TERMS[self.spec.env_id].values())
+        self._compiled_terms = [t for t in terms if t.compiled]
+        self._numpy_terms = [t for t in terms if not t.compiled]
         self.reward_names = (*self.builtin_reward_names, *(t.name for t in self._compiled_terms),
                              *(t.name for t in self._numpy_terms))
         self._make_slots()
 
     def _make_slots(self) -> None:
         """The compiled slots of the registered controller and reward terms (typed lists, rebuilt on unpickling)."""
-        from continuum_gym import registry
+        from continuum_gym.envs import registered
         from continuum_gym.envs.custom import controller_slot, reward_slot
 
-        controllers = registry.CONTROLLERS[self.spec.env_id]
+        controllers = registered.CONTROLLERS[self.spec.env_id]
         if self.base_controller is not None and self.base_controller not in self.spec.baselines \
                 and self.base_controller not in controllers:  # imports the plug-in's module, or says where to
-            registry.resolve("controller", self.spec.env_id, self.base_controller)
+            registered.resolve("controller", self.spec.env_id, self.base_controller)
         self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._rates_wanted = bool(self._compiled_terms or self._numpy_terms)
@@ -365,10 +365,20 @@ class BatchedCore:
     def info_fields_doc(self) -> str:
         return fields_table(self.info_fields)
 
+    # ------------------------------------------------------------------ rendering (pybullet, optional)
+    def make_scene(self):
+        """The env's pybullet scene (``spec.scene``), built for this core's robot and cameras."""
+        return self.spec.scene_class().from_core(self)
 
-# ---------------------------------------------------------------------- stable-baselines3 adapter
-def make_sb3_vec_env(env_id: str, num_envs: int, seed: int | None = None, **kwargs):
-    """An SB3 ``VecEnv`` backed by the native batched core of ``env_id`` (same-step reset)."""
-    from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
+    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
+        """RGB image (size, size, 3) of one row's state through ``camera``."""
+        scene.show_row(self, row)
+        return scene.render(camera=camera, width=size, height=size)
 
-    return ContinuumSB3VecEnv(env_id, num_envs, seed=seed, **kwargs)
+    def pixel_occlusion(self, row: int, scene, resolution: int = 128) -> float:
+        """Fraction of the endoscope image's field of view the robot covers in one row's state."""
+        if not self.supports_pixel_occlusion:
+            raise ValueError(f"pixel_occlusion applies to OcclusionAvoidance only; this env is {self.spec.env_id}")
+        scene.show_row(self, row)
+        return scene.pixel_occlusion(resolution)
+

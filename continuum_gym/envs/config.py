@@ -74,6 +74,7 @@ class EnvConfig:
 
     #: Gymnasium id the configuration belongs to (set by subclasses).
     env_id: ClassVar[str] = ""
+    baselines: ClassVar[tuple] = ()
     #: Keyword arguments accepted for backward compatibility that must stay at None here.
     foreign_keywords: ClassVar[tuple] = ()
 
@@ -128,10 +129,10 @@ class EnvConfig:
 
     def _reference(self, key: str, name: str) -> str:
         """A registered task family or controller as ``"module:name"`` (another process imports the module)."""
-        from continuum_gym import registry
+        from continuum_gym.envs import registered
 
-        kind, table = ("task", registry.TASKS) if key == "task" else ("controller", registry.CONTROLLERS)
-        return registry.reference_of(kind, self.env_id, name) if name in table[self.env_id] else name
+        kind, table = ("task", registered.TASKS) if key == "task" else ("controller", registered.CONTROLLERS)
+        return registered.reference_of(kind, self.env_id, name) if name in table[self.env_id] else name
 
     def __reduce__(self):
         # Pickles carry the plug-ins' modules: unpickling imports them (registering the plug-ins) and
@@ -191,9 +192,10 @@ class EnvConfig:
     @classmethod
     def all_default_weights(cls) -> dict:
         """The built-in reward terms' default weights and those of the terms registered for this env."""
-        from continuum_gym import registry
+        from continuum_gym.envs import registered
 
-        return {**cls.default_weights, **{name: term.weight for name, term in registry.REWARD_TERMS[cls.env_id].items()}}
+        terms = registered.REWARD_TERMS[cls.env_id]
+        return {**cls.default_weights, **{name: term.weight for name, term in terms.items()}}
 
     @classmethod
     def arguments_table(cls) -> str:
@@ -209,14 +211,14 @@ class EnvConfig:
 
 
 def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
-    from continuum_gym import registry
+    from continuum_gym.envs import registered
     from continuum_gym.envs.task_sources import resolve_task
 
     set_ = object.__setattr__
     if isinstance(config.task, str) and config.task not in tasks and (
-            ":" in config.task or config.task in registry.TASKS[config.env_id]):
-        set_(config, "task", registry.resolve("task", config.env_id, config.task))
-    elif isinstance(config.task, str) and config.task not in tasks and config.task not in registry.TASKS[config.env_id]:
+            ":" in config.task or config.task in registered.TASKS[config.env_id]):
+        set_(config, "task", registered.resolve("task", config.env_id, config.task))
+    elif isinstance(config.task, str) and config.task not in tasks and config.task not in registered.TASKS[config.env_id]:
         from continuum_gym import plugins
 
         plugins.load_known()  # a task family of a plug-in module that this process has not imported yet
@@ -246,6 +248,8 @@ class OcclusionConfig(EnvConfig):
     """Configuration of ``ContinuumGym/OcclusionAvoidance-v0`` (SI units)."""
 
     env_id: ClassVar[str] = "ContinuumGym/OcclusionAvoidance-v0"
+    #: The analytic controllers a residual can be built on (the env spec lists them from here).
+    baselines: ClassVar[tuple] = ("minimum_norm", "projected_gradient")
     default_weights: ClassVar[dict] = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0,
                                        "action": 0.01}
     residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
@@ -343,6 +347,7 @@ class ViewTrackingConfig(EnvConfig):
     """Configuration of ``ContinuumGym/ViewTracking-v0`` (SI units)."""
 
     env_id: ClassVar[str] = "ContinuumGym/ViewTracking-v0"
+    baselines: ClassVar[tuple] = ("resolved_rate", "dimension_reduced")
     foreign_keywords: ClassVar[tuple] = ("max_bend", "lens_model")
     default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
                                        "overlap_bonus": 0.0}
@@ -420,13 +425,13 @@ class ViewTrackingConfig(EnvConfig):
 
 def _resolve_robot(robot: Any, kind: type, env_id: str):
     """A robot instance from an instance, a registered name (or ``"module:name"``) or None (the paper's)."""
-    from continuum_gym import registry
+    from continuum_gym.envs import registered
 
     if robot is None:
         return kind()
     if isinstance(robot, str):
         try:
-            return registry.ROBOTS[env_id][registry.resolve("robot", env_id, robot)]
+            return registered.ROBOTS[env_id][registered.resolve("robot", env_id, robot)]
         except ValueError as error:
             raise ValueError(f"robot {robot!r} is not registered (continuum_gym.registry.register_robot), nor a "
                              f"{kind.__name__}: {error}") from None
@@ -437,17 +442,15 @@ def _resolve_robot(robot: Any, kind: type, env_id: str):
 
 def _resolve_controller(config: EnvConfig) -> str | None:
     """The base controller's name: a built-in baseline, a registered controller (or ``"module:name"``) or None."""
-    from continuum_gym import registry
-    from continuum_gym.envs.spec import ENV_SPECS
-
+    from continuum_gym.envs import registered
     value = config.base_controller
-    builtin = ENV_SPECS[config.env_id].baselines
+    builtin = config.baselines
     if value is None or (isinstance(value, str) and value in builtin):
         return value
     if not isinstance(value, str):
         choice(value, builtin, "base_controller")
     try:
-        return registry.resolve("controller", config.env_id, value)
+        return registered.resolve("controller", config.env_id, value)
     except ValueError as error:
         raise ValueError(f"base_controller must be one of {list(builtin)}, a registered controller or None"
                          f"{closest(value, builtin) if ':' not in value else ''}; got {value!r}. If it is your own "
@@ -456,15 +459,15 @@ def _resolve_controller(config: EnvConfig) -> str | None:
 
 def _plugin_modules(config: EnvConfig) -> list:
     """The importable modules of the plug-ins a config uses (controller, task family, reward terms)."""
-    from continuum_gym import registry
+    from continuum_gym.envs import registered
 
     env = config.env_id
-    names = [("reward term", name) for name in registry.REWARD_TERMS[env]]
-    if config.base_controller in registry.CONTROLLERS[env]:
+    names = [("reward term", name) for name in registered.REWARD_TERMS[env]]
+    if config.base_controller in registered.CONTROLLERS[env]:
         names.append(("controller", config.base_controller))
-    if isinstance(config.task, str) and config.task in registry.TASKS[env]:
+    if isinstance(config.task, str) and config.task in registered.TASKS[env]:
         names.append(("task", config.task))
-    modules = [registry.origin_of(kind, env, name) for kind, name in names]
+    modules = [registered.origin_of(kind, env, name) for kind, name in names]
     return sorted({module for module in modules if module})
 
 

@@ -37,7 +37,7 @@ TERM_DOC = ("term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rat
 
 
 def _paper_args(env_id: str):
-    from continuum_gym.registry import OCCLUSION
+    from continuum_gym.envs.ids import OCCLUSION
 
     if env_id == OCCLUSION:
         from continuum_gym.geometry.lens_cone import LensCone
@@ -103,7 +103,7 @@ def _compiled(fn, signature, what: str, doc: str):
 
 def check_controller(controller) -> None:
     """Compile a registered controller for its env's signature and run it once on a paper-like state."""
-    from continuum_gym.registry import OCCLUSION
+    from continuum_gym.envs.ids import OCCLUSION
 
     occlusion = controller.env_id == OCCLUSION
     doc = OCCLUSION_RATES_DOC if occlusion else VIEW_RATES_DOC
@@ -199,7 +199,7 @@ def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewa
 
 def controller_predict(controller, observation) -> np.ndarray:
     """A registered controller's command for a controller observation dict (as the built-in ``predict``)."""
-    from continuum_gym.registry import OCCLUSION
+    from continuum_gym.envs.ids import OCCLUSION
 
     if not isinstance(observation, dict):
         raise ValueError(f"predict reads a dict observation (core.controller_observation(row)); got "

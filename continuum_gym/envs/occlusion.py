@@ -183,22 +183,6 @@ class OcclusionCore(BatchedCore):
         return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p, "R_des": self.desired_rotation(row, t),
                 "v_des": v, "dt": self.control_dt / self.substeps, "robot": self.robot, "cone": self.cone}
 
-    # ------------------------------------------------------------------ rendering (pybullet, optional)
-    def make_scene(self):
-        from continuum_gym.render import OcclusionScene
-
-        return OcclusionScene(robot=self.robot, cone=self.cone)
-
-    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
-        """RGB image (size, size, 3) of one row's state through ``camera``."""
-        scene.update(self.q[row], self.gamma[row])
-        return scene.render(camera=camera, width=size, height=size)
-
-    def pixel_occlusion(self, row: int, scene) -> float:
-        from continuum_gym.render import pixel_occlusion
-
-        return pixel_occlusion(self.robot, self.q[row], self.gamma[row], cone=self.cone, scene=scene)
-
 
 _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotating angled-lens endoscope.
 

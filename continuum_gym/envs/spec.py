@@ -96,6 +96,9 @@ class EnvSpec:
     cameras: tuple[str, ...]
     record_task: str  #: default task of ``continuum-gym render``
     record_value: str  #: per-step value shown under the recorded frames
+    #: "module:Class" of the pybullet scene that draws the env (``Scene.from_core`` / ``show_row``):
+    #: named, not imported, so the environments do not depend on the renderer
+    scene: str = ""
 
     @property
     def short_name(self) -> str:
@@ -104,6 +107,10 @@ class EnvSpec:
 
     def core_class(self) -> type:
         module, name = self.core.split(":")
+        return getattr(importlib.import_module(module), name)
+
+    def scene_class(self) -> type:
+        module, name = self.scene.split(":")
         return getattr(importlib.import_module(module), name)
 
     def metric(self, name: str) -> Metric:
@@ -121,10 +128,11 @@ OCCLUSION_SPEC = EnvSpec(
     env_id=OcclusionConfig.env_id,
     config_class=OcclusionConfig,
     core="continuum_gym.envs.occlusion:OcclusionCore",
+    scene="continuum_gym.render.occlusion_scene:OcclusionScene",
     entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceEnv",
     vector_entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceVectorEnv",
     max_episode_steps=1000,
-    baselines=("minimum_norm", "projected_gradient"),
+    baselines=OcclusionConfig.baselines,
     headline_baseline="projected_gradient",
     headline_metric="mean_voi",
     metrics=(
@@ -158,10 +166,11 @@ VIEW_SPEC = EnvSpec(
     env_id=ViewTrackingConfig.env_id,
     config_class=ViewTrackingConfig,
     core="continuum_gym.envs.view_tracking:ViewTrackingCore",
+    scene="continuum_gym.render.view_scene:ViewTrackingScene",
     entry_point="continuum_gym.envs.view_tracking:ViewTrackingEnv",
     vector_entry_point="continuum_gym.envs.view_tracking:ViewTrackingVectorEnv",
     max_episode_steps=1000,
-    baselines=("resolved_rate", "dimension_reduced"),
+    baselines=ViewTrackingConfig.baselines,
     headline_baseline="dimension_reduced",
     headline_metric="mean_or",
     metrics=(
@@ -225,6 +234,16 @@ def registered_kwargs(env_id: str) -> dict:
     return dict(registered.kwargs or {}) if registered is not None else {}
 
 
+def registered_base(env_id: str) -> str | None:
+    """The registered controller an id was registered with as its base (its name), or None (a built-in or none)."""
+    from continuum_gym.plugins import split_reference
+
+    base = registered_kwargs(env_id).get("base_controller")
+    if not isinstance(base, str) or base in get_spec(env_id).baselines:
+        return None
+    return split_reference(base)[1]
+
+
 def _registered(env_id: str):
     from gymnasium.envs.registration import registry
 
@@ -234,4 +253,4 @@ def _registered(env_id: str):
 
 
 __all__ = ["EnvSpec", "Metric", "EpisodeMetric", "TaskSet", "ReferenceRow", "ENV_SPECS", "OCCLUSION_SPEC", "VIEW_SPEC",
-           "get_spec", "registered_kwargs"]
+           "get_spec", "registered_kwargs", "registered_base"]

@@ -171,9 +171,9 @@ class SampledTasks(TaskSource):
 
 def task_names(env_id: str, builtin: Sequence[str]) -> tuple:
     """Built-in and registered task names of an environment."""
-    from continuum_gym import registry
+    from continuum_gym.envs import registered
 
-    return (*builtin, *registry.TASKS.get(env_id, {}))
+    return (*builtin, *registered.TASKS.get(env_id, {}))
 
 
 def resolve_task(task: str, env_id: str, builtin: Sequence[str], occlusion: bool) -> TaskSource:
@@ -190,9 +190,9 @@ def resolve_task(task: str, env_id: str, builtin: Sequence[str], occlusion: bool
     choice(task, task_names(env_id, builtin), "task")
     if task in builtin:
         return BuiltinTasks(task, occlusion)
-    from continuum_gym import registry
+    from continuum_gym.envs import registered
 
-    return registry.TASKS[env_id][task]
+    return registered.TASKS[env_id][task]
 
 
 __all__ = ["TaskSource", "BuiltinTasks", "RecordedTasks", "SampledTasks", "trajectory_rows", "task_names",

@@ -160,19 +160,6 @@ class ViewTrackingCore(BatchedCore):
         p, R = self.davinci.target_pose(self.davinci_configuration(row))
         return {"q": self.q[row].copy(), "p_target": p, "R_target": R, "dt": self.control_dt, "robot": self.robot}
 
-    def make_scene(self):
-        from continuum_gym.render import ViewTrackingScene
-
-        return ViewTrackingScene(endoscope=self.robot, davinci=self.davinci, frustum=self.frustum)
-
-    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
-        """RGB image (size, size, 3) of one row's state through ``camera``."""
-        scene.update(self.q[row], self.davinci_configuration(row))
-        return scene.render(camera=camera, width=size, height=size)
-
-    def pixel_occlusion(self, row: int, scene) -> float:
-        raise ValueError("pixel_occlusion applies to OcclusionAvoidance only")
-
 
 _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a moving da Vinci 30-degree view.
 

@@ -67,13 +67,10 @@ def check_dataset_arguments(env_id: str, controller: str, split: str, episodes: 
 def own_controllers(env_id: str) -> tuple:
     """The registered controllers of ``env_id``'s environment (the id's own base first)."""
     from continuum_gym import registry
-    from continuum_gym.envs.spec import registered_kwargs
-    from continuum_gym.plugins import split_reference
+    from continuum_gym.envs.spec import registered_base
 
-    spec = get_spec(env_id)
-    base = registered_kwargs(env_id).get("base_controller")
-    names = [split_reference(base)[1]] if isinstance(base, str) and base not in spec.baselines else []
-    return tuple(dict.fromkeys([*names, *registry.controller_names(spec.env_id)]))
+    base = registered_base(env_id)
+    return tuple(dict.fromkeys([*([base] if base else []), *registry.controller_names(get_spec(env_id).env_id)]))
 
 
 def collect_episodes(env_id: str, controller: str, *, split: str = "train", episodes: int = 10,

@@ -26,6 +26,7 @@ from continuum_gym.envs.spec import (
     VIEW_SPEC,
     EnvSpec,
     get_spec,
+    registered_base,
     registered_kwargs,
 )
 from continuum_gym.evaluation.tables import (
@@ -159,7 +160,7 @@ def baseline_methods(spec: EnvSpec, own: list | tuple = ()) -> list:
 
 def own_bases(spec: EnvSpec, env_id: str, methods: list) -> list:
     """The registered controllers in play: the id's own base and those the learned methods were trained on."""
-    candidates = [registered_kwargs(env_id).get("base_controller")]
+    candidates = [registered_base(env_id)]
     candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
     return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
 

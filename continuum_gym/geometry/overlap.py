@@ -5,10 +5,13 @@ Three implementations of the same number:
 * :func:`overlap_ratio` — exact, batched, compiled (numba): the divergence theorem over the faces of
   both frustums, each clipped by the other's half-spaces (``overlap_clipping``, whose docstring says how
   coplanar and nearly coplanar faces stay exact).
-* :func:`overlap_ratio_reference` — the polytope-library recipe of paper-notes §2.4 (scipy: Chebyshev
+* ``overlap_reference.overlap_ratio_reference`` — the polytope-library recipe of paper-notes §2.4 (scipy: Chebyshev
   centre by ``linprog``/HiGHS, ``HalfspaceIntersection``, ``ConvexHull``); one pair, slow; the
   test reference.
-* :func:`overlap_ratio_monte_carlo` — fraction of uniform samples of F_a that fall inside F_b.
+* ``overlap_reference.overlap_ratio_monte_carlo`` — fraction of uniform samples of F_a inside F_b.
+
+The two references (scipy, slow) live in their own module, which builds on this one and loads only
+when a test or a user asks for it (``continuum_gym.geometry`` exports all three).
 
 :func:`overlap_ratio_nb` is the compiled per-pair kernel without input checks, callable from other
 numba kernels (e.g. a whole environment step).
@@ -239,12 +242,3 @@ def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndar
         _raise(code, index)
     return out.reshape(batch)
 
-
-def __getattr__(name: str):
-    # The references live in overlap_reference.py (scipy, slow) and load only when asked for here, where the
-    # module docstring lists them.
-    if name in ("overlap_ratio_reference", "overlap_ratio_monte_carlo", "REFERENCE_MIN_RADIUS"):
-        from continuum_gym.geometry import overlap_reference
-
-        return getattr(overlap_reference, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -169,6 +169,15 @@ class OcclusionScene(Scene):
             self._ids += self._tissue_bodies
 
     # ------------------------------------------------------------------ state
+    @classmethod
+    def from_core(cls, core) -> OcclusionScene:
+        """The scene of an OcclusionAvoidance core: its robot and cone."""
+        return cls(robot=core.robot, cone=core.cone)
+
+    def show_row(self, core, row: int) -> None:
+        """Move the bodies to row ``row`` of ``core``: its joints and endoscope rotation."""
+        self.update(core.q[row], core.gamma[row])
+
     def update(self, q, gamma) -> None:
         """Move every body to configuration ``q`` (dof,) and endoscope rotation ``gamma`` (rad)."""
         self._check_open()

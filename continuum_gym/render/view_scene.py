@@ -123,6 +123,15 @@ class ViewTrackingScene(Scene):
         self._finish(("endoscope",))
         self._ids = self._stem + self._links + self._davinci + self._frusta["endoscope"] + self._frusta["davinci"]
 
+    @classmethod
+    def from_core(cls, core) -> ViewTrackingScene:
+        """The scene of a ViewTracking core: its continuum endoscope, da Vinci and frustum."""
+        return cls(endoscope=core.robot, davinci=core.davinci, frustum=core.frustum)
+
+    def show_row(self, core, row: int) -> None:
+        """Move the bodies to row ``row`` of ``core``: its joints and the da Vinci's configuration."""
+        self.update(core.q[row], core.davinci_configuration(row))
+
     def update(self, q, q_davinci) -> None:
         """Move the continuum endoscope to ``q`` (6,) and the da Vinci endoscope to ``q_davinci`` (4,)."""
         self._check_open()

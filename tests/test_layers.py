@@ -1,0 +1,141 @@
+"""The package's layers, read from its sources: every import (function-level ones included) points down.
+
+robots <- geometry <- baselines <- envs <- registry <- agents / evaluation / render / config files <- the
+command line (the environments name their pybullet scene in their spec; they do not import the renderer).
+No import cycle between modules, no private name imported from another module, and nothing below the
+environments imports gymnasium, torch or stable-baselines3.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "continuum_gym"
+
+#: Layer of each module (by longest matching prefix); a module may import its own layer and those below.
+LAYERS = {
+    "continuum_gym.validation": 0,
+    "continuum_gym.plugins": 0,
+    "continuum_gym.robots": 1,
+    "continuum_gym.geometry": 2,
+    "continuum_gym.baselines": 3,
+    "continuum_gym.envs": 4,
+    "continuum_gym.registry": 5,
+    "continuum_gym.config_files": 6,
+    "continuum_gym.precompile": 6,
+    "continuum_gym.agents": 6,
+    "continuum_gym.evaluation": 6,
+    "continuum_gym.render": 6,
+    "continuum_gym.cli": 7,
+    "continuum_gym": 4,  # the package root registers the ids (envs.registration) and nothing else
+}
+#: Third-party frameworks that the layers below the environments must not need.
+FRAMEWORKS = ("gymnasium", "torch", "stable_baselines3")
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        if "_precompiled" in path.parts:
+            continue
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        out[name] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _layer(module: str) -> int:
+    prefix = max((p for p in LAYERS if module == p or module.startswith(p + ".")), key=len)
+    return LAYERS[prefix]
+
+
+def _imports(name: str, path: Path):
+    """(imported module, imported names, line) of every import statement in the module, at any depth."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                yield alias.name, (), node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            for alias in node.names:
+                full = f"{base}.{alias.name}"
+                if full in MODULES:
+                    yield full, (), node.lineno
+                else:
+                    yield base, (alias.name,), node.lineno
+
+
+def _owner(module: str) -> str | None:
+    while module and module not in MODULES:
+        module = module.rpartition(".")[0]
+    return module or None
+
+
+def _graph() -> nx.DiGraph:
+    graph = nx.DiGraph()
+    for name, path in MODULES.items():
+        graph.add_node(name)
+        for target, _, line in _imports(name, path):
+            owner = _owner(target) if target.startswith("continuum_gym") else None
+            if owner and owner not in (name, "continuum_gym"):  # the root is imported before any submodule
+                graph.add_edge(name, owner, line=line)
+    return graph
+
+
+def test_the_layer_map_covers_every_module():
+    assert len(MODULES) > 80
+    for name in MODULES:
+        assert any(name == p or name.startswith(p + ".") for p in LAYERS), name
+
+
+def test_no_import_cycle_between_modules():
+    cycles = sorted(nx.simple_cycles(_graph()), key=len)
+    assert cycles == [], f"{len(cycles)} import cycles, e.g. {' -> '.join(cycles[0] + cycles[0][:1])}"
+
+
+def test_every_import_points_down_the_layers():
+    graph = _graph()
+    upward = [f"{a} (layer {_layer(a)}, line {graph.edges[a, b]['line']}) imports {b} (layer {_layer(b)})"
+              for a, b in graph.edges if _layer(b) > _layer(a)]
+    assert upward == []
+
+
+def test_no_private_name_crosses_modules():
+    crossing = []
+    for name, path in MODULES.items():
+        for target, names, line in _imports(name, path):
+            if not target.startswith("continuum_gym"):
+                continue
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            private += [target.rpartition(".")[2]] if target.rpartition(".")[2].startswith("_") else []
+            crossing += [f"{name}:{line} imports {target}.{n}" for n in private]
+    assert crossing == []
+
+
+@pytest.mark.parametrize("layer", ["continuum_gym.robots", "continuum_gym.geometry", "continuum_gym.baselines"])
+def test_the_layers_below_the_environments_need_no_rl_framework(layer):
+    found = [f"{name}:{line} imports {target}" for name, path in MODULES.items()
+             if name == layer or name.startswith(layer + ".")
+             for target, _, line in _imports(name, path) if target.split(".")[0] in FRAMEWORKS]
+    assert found == []
+
+
+def test_the_checks_see_what_they_look_for(tmp_path):
+    """The graph is built from real import statements: a known downward edge and a known function-level one."""
+    graph = _graph()
+    assert graph.has_edge("continuum_gym.envs.occlusion_kernel", "continuum_gym.envs.custom")
+    assert graph.has_edge("continuum_gym.envs.registered", "continuum_gym.plugins")
+    # a function-level import (inside CustomController.predict) is an edge too
+    assert graph.has_edge("continuum_gym.envs.registered", "continuum_gym.envs.custom")
+    assert _layer("continuum_gym.envs.spec") == 4 and _layer("continuum_gym.agents.train") == 6
