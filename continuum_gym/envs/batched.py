@@ -7,8 +7,9 @@ all of them with one compiled call.
 
 from __future__ import annotations
 
+import abc
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -132,16 +133,25 @@ class KernelCall:
             run_claimed(kernel, args, num_rows, threads, block)
 
 
-class BatchedCore:
-    """Interface of a batched core (see ``OcclusionCore``); documented here once.
+class BatchedCore(abc.ABC):
+    """The contract of a batched core (see ``OcclusionCore``), declared and documented here once.
 
     A core holds the state of N robots as arrays (``q``, ``obs``, ``metrics``, ``flags``, ...) and
-    advances all of them with one compiled call. Subclasses set ``spec``, ``config_class``,
-    ``reward_names`` and ``info_fields`` (one definition of ``info`` for one row and for the batch).
+    advances all of them with one compiled call. The front ends (``envs/single.py``, ``envs/vector.py``,
+    ``envs/sb3.py``), evaluation, rendering and precompilation call only what this class declares.
+
+    A concrete core (one that does not pass ``abstract=True`` to the class statement) must define every
+    abstract method below and every name in :data:`REQUIRED_CLASS_ATTRIBUTES`; one that lacks any fails
+    at its class statement with a ``TypeError`` naming what is missing, not deep inside a later call.
     """
 
-    spec = None
-    config_class: type = None
+    #: Class attributes a concrete core must set, each documented at its declaration below.
+    REQUIRED_CLASS_ATTRIBUTES: ClassVar[tuple[str, ...]] = (
+        "spec", "config_class", "step_kernel", "terminated_flag", "truncated_flag", "builtin_reward_names",
+        "info_fields", "metric_columns")
+
+    spec: ClassVar[Any] = None  #: the env's ``EnvSpec`` (id, baselines, metrics, scene, kernels)
+    config_class: ClassVar[type] = None  #: the ``EnvConfig`` subclass the core is built from
     step_kernel = None  #: the compiled ``*_step_batch`` of the core
     _observe_mask: np.ndarray | None = None  # observe_rows' ``active`` (N,) uint8, zero between calls
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
@@ -150,14 +160,30 @@ class BatchedCore:
     terminated_flag: int  #: the column of ``flags`` its step kernel sets when a row terminates
     truncated_flag: int  #: ... and when a row is truncated
     row_threads: int  #: threads a step runs on (``row_threads``), set by the constructor
-    builtin_reward_names: tuple = ()
-    info_fields: tuple = ()
-    metric_columns: dict = {}  # info name -> column of ``metrics``, for numpy reward terms
+    builtin_reward_names: tuple = ()  #: the env's own reward terms, in the order of its weights
+    info_fields: tuple = ()  #: ``InfoField``s: one definition of ``info`` for one row and for the batch
+    metric_columns: dict = {}  #: info name -> column of ``metrics``, for numpy reward terms
     num_envs: int
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
     obs: np.ndarray  # (N, obs_dim) float64
     task_count: int
+
+    def __init_subclass__(cls, abstract: bool = False, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if abstract:
+            return
+        missing = sorted(name for name, value in vars(BatchedCore).items()
+                         if getattr(value, "__isabstractmethod__", False)
+                         and getattr(getattr(cls, name), "__isabstractmethod__", False))
+        def defines(name: str) -> bool:  # set, not None, by a class below BatchedCore (the nearest one wins)
+            owner = next(k for k in cls.__mro__ if name in vars(k) or k is BatchedCore)
+            return owner is not BatchedCore and vars(owner)[name] is not None
+
+        missing += [name for name in BatchedCore.REQUIRED_CLASS_ATTRIBUTES if not defines(name)]
+        if missing:
+            raise TypeError(f"{cls.__name__} is a BatchedCore but does not define {', '.join(missing)} "
+                            "(see continuum_gym.envs.batched.BatchedCore; pass abstract=True for a partial core)")
 
     def _config(self, config, kwargs):
         """The validated config: ``config`` as given, or built from the keyword arguments."""
@@ -184,8 +210,17 @@ class BatchedCore:
             reader = self._info_row_reader = row_reader(self.info_fields, self)
         return reader(self, row)
 
-    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray):  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
+        """Start new episodes in ``rows`` (int64) on the task instances ``task_ids`` and observe them."""
+
+    @abc.abstractmethod
+    def step_values(self) -> dict:
+        """Per-step values {name: (N,) array} the evaluation reduces to episode metrics (``spec.episode_metrics``)."""
+
+    @abc.abstractmethod
+    def controller_observation(self, row: int = 0) -> dict:
+        """The dict observation an analytic or registered controller's ``predict`` reads, for one row."""
 
     def step(self, actions: np.ndarray, active: np.ndarray):
         """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
@@ -264,9 +299,9 @@ class BatchedCore:
         finally:
             mask[rows] = 0
 
-    def kernel_model(self) -> tuple:  # pragma: no cover - interface
+    @abc.abstractmethod
+    def kernel_model(self) -> tuple:
         """The model bundles of the step kernels: the robot's and the controller's (and the cameras')."""
-        raise NotImplementedError
 
     def joint_values(self) -> np.ndarray:
         """A copy of every row's joints (N, k) in the action's index layout (rad; m for insertion)."""
