@@ -26,7 +26,7 @@ setup: $(STAMP)
 
 setup-test: $(TEST_STAMP)
 
-# After editing the package's sources the precompiled set no longer matches them and is ignored
+# After editing the package's code (not only docstrings or comments) the precompiled set no longer matches and is ignored
 # (kernels compile on first use, as numba does); this rebuilds it.
 precompile: setup
 	$(BIN)/continuum-gym precompile

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-MANIFEST = "manifest.json"
+from continuum_gym.robots.compiled import MANIFEST
 
 _WORKER_FLAG = "--worker"
 #: Starts a worker's progress lines on its stdout; its other stdout lines are passed on as they are.
@@ -139,7 +139,7 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
     build takes about as long as the slowest environment's first compile. One progress bar (on a
     terminal) counts the steps of every worker; a line says when each environment is done.
     """
-    from continuum_gym.robots.compiled import PORTABLE_CPU, source_digest
+    from continuum_gym.robots.compiled import PORTABLE_CPU, digest_of, source_hashes
 
     out = out.resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -157,12 +157,14 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
                                "if any, is left as it was")
         import numba
 
+        sources = source_hashes()
         manifest = {
-            "digest": source_digest(),
+            "digest": digest_of(sources),
             "cpu": PORTABLE_CPU if portable else _host_cpu(),
             "numba": numba.__version__,
             "kernels": sum(1 for _ in building.rglob("*.nbc")),
             "seconds": round(time.perf_counter() - start, 1),
+            "sources": sources,  # lets a process skip parsing the files it finds unchanged (source_digest)
         }
         (building / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
         previous = out.with_name(f"{out.name}.previous-{os.getpid()}")

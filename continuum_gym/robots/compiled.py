@@ -5,10 +5,12 @@ code is looked up in two places before numba compiles it:
 
 1. the *precompiled set*, ``continuum_gym/_precompiled/`` (or ``CONTINUUM_GYM_PRECOMPILED_DIR``), written
    once per install by ``continuum-gym precompile`` (``make setup`` runs it). It is read only, and valid
-   only for the exact package sources, numba, llvmlite, numpy and Python it was built with: one digest of
-   all of them stamps every entry, so an edited source file, another numba or a different CPU makes the
-   set miss as a whole and never serves stale code (numba's own cache checks only the kernel's own file,
-   not the kernels it calls);
+   only for the exact package code, numba, llvmlite, numpy and Python it was built with: one digest of
+   all of them stamps every entry, so edited code, another numba or a different CPU makes the set miss
+   as a whole and never serves stale code (numba's own cache checks only the kernel's own file, not the
+   kernels it calls). The digest covers what kernels are compiled from: each module's syntax tree
+   without docstrings and comments, so editing those (or a test) keeps the set; entries are named by
+   module and function, not by line number as in numba's own cache;
 2. numba's own cache (``NUMBA_CACHE_DIR`` or ``__pycache__``), where anything compiled at run time goes.
 
 Why not an ahead-of-time extension module: ``numba.pycc`` is deprecated, exports plain C functions
@@ -26,8 +28,10 @@ no speed against a native one, and computes the same bits.
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
+import json
 import os
 import platform
 import sys
@@ -62,20 +66,67 @@ def precompiled_enabled() -> bool:
     return value not in ("0", "false", "no")
 
 
-@functools.cache
-def source_digest() -> str:
-    """sha256 of every ``.py`` file of the package and of the compiler stack's versions.
+#: The precompiled set's manifest: its digest, per-source hashes (``sources``), CPU, numba version, ...
+MANIFEST = "manifest.json"
 
-    It stamps the precompiled set: any edited source, another numba, llvmlite, numpy or Python gives
-    another digest, and the whole set misses instead of serving code compiled from other sources.
+
+def code_hash(source: bytes) -> str:
+    """sha256 of a module's code as a compiler sees it: its syntax tree without docstrings and comments.
+
+    ``ast.dump`` leaves out line numbers, so moving code or editing a docstring or a comment keeps the
+    hash; any change to a statement, a name or a constant (which kernels freeze at compile time) changes it.
     """
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body \
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                and isinstance(body[0].value.value, str):
+            body[0] = ast.Pass()
+    return hashlib.sha256(ast.dump(tree).encode()).hexdigest()
+
+
+def source_hashes(known: dict | None = None) -> dict[str, list[str]]:
+    """{module path: [sha256 of its bytes, :func:`code_hash`]} for every ``.py`` file of the package.
+
+    ``known`` (a manifest's ``sources``) saves parsing files whose bytes are unchanged since it was written.
+    """
+    known = known or {}
+    hashes = {}
+    for path in sorted(PACKAGE_ROOT.rglob("*.py")):
+        name = path.relative_to(PACKAGE_ROOT).as_posix()
+        data = path.read_bytes()
+        raw = hashlib.sha256(data).hexdigest()
+        entry = known.get(name)
+        hashes[name] = [raw, entry[1] if isinstance(entry, list) and len(entry) == 2 and entry[0] == raw
+                        else code_hash(data)]
+    return hashes
+
+
+def digest_of(hashes: dict) -> str:
+    """The digest of a package's :func:`source_hashes` and of this compiler stack's versions."""
     digest = hashlib.sha256()
     for part in (sys.version, numba.__version__, llvmlite.__version__, np.__version__, platform.machine()):
         digest.update(part.encode() + b"\0")
-    for path in sorted(PACKAGE_ROOT.rglob("*.py")):
-        digest.update(path.relative_to(PACKAGE_ROOT).as_posix().encode() + b"\0")
-        digest.update(path.read_bytes() + b"\0")
+    for name, (_, code) in sorted(hashes.items()):
+        digest.update(f"{name}\0{code}\0".encode())
     return digest.hexdigest()
+
+
+@functools.cache
+def source_digest() -> str:
+    """The digest that stamps the precompiled set: the package's code and the compiler stack's versions.
+
+    Any edited statement, another numba, llvmlite, numpy or Python gives another digest, and the whole
+    set misses instead of serving code compiled from other sources. Docstrings and comments are not
+    part of it (:func:`code_hash`). Only files whose bytes changed since the set was built are parsed,
+    so the digest costs milliseconds on an unedited install.
+    """
+    try:
+        known = json.loads((precompiled_dir() / MANIFEST).read_text()).get("sources")
+    except (OSError, ValueError, AttributeError):
+        known = None
+    return digest_of(source_hashes(known if isinstance(known, dict) else None))
 
 
 def portable_magic(codegen) -> tuple:
@@ -107,6 +158,10 @@ class PrecompiledFirstCache(FunctionCache):
     def __init__(self, py_func: Callable):
         super().__init__(py_func)
         self._module_dir = py_func.__module__.replace(".", "-")
+        # numba names its entries <module>.<qualname>-<first line>: in the set, without the line, so that
+        # code moving within its file keeps its entries (the index key holds the bytecode's hash anyway).
+        qualname = py_func.__qualname__.replace("<locals>", "").replace("<", "").replace(">", "")
+        self._filename_base = f"{py_func.__module__}.{qualname}-py{sys.version_info[0]}{sys.version_info[1]}"
         self._set_dir = precompiled_dir()
         self._layers = {}
 
@@ -114,7 +169,7 @@ class PrecompiledFirstCache(FunctionCache):
         if name not in self._layers:
             self._layers[name] = IndexDataCacheFile(
                 cache_path=str(self._set_dir / name / self._module_dir),
-                filename_base=self._impl.filename_base,
+                filename_base=self._filename_base,
                 source_stamp=source_digest(),
             )
         return self._layers[name]

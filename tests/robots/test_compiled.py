@@ -93,26 +93,52 @@ def test_precompiled_set_serves_the_same_code_without_numba_cache(toy_tree):
     assert nbc_files(toy_tree / "numba-cache")
 
 
+def test_the_set_still_serves_a_kernel_whose_file_gained_lines_and_docstrings(toy_tree):
+    written = run_child(toy_tree, "write")
+    moved = '"""Toy kernels, documented."""\n# the kernels moved down by a few lines\n\n' + TOY_MODULE
+    (toy_tree / "src" / "toy_kernels.py").write_text(moved.replace("def toy(n):", 'def toy(n):\n    """A sum."""'))
+    assert run_child(toy_tree, "read") == {"bits": written["bits"], "hits": 1, "misses": 0}
+
+
 def test_set_built_from_other_sources_is_ignored(toy_tree):
     run_child(toy_tree, "write")
     stale = run_child(toy_tree, "stale")
     assert stale["hits"] == 0 and stale["misses"] == 1
 
 
-def test_digest_follows_every_source_file(tmp_path, monkeypatch):
+def test_digest_follows_the_code_of_every_source_file_not_its_docstrings_or_comments(tmp_path, monkeypatch):
     tree = tmp_path / "pkg"
     (tree / "robots").mkdir(parents=True)
-    (tree / "robots" / "a.py").write_text("x = 1\n")
+    (tree / "robots" / "a.py").write_text('"""Module a."""\nx = 1\n\n\ndef f(y):\n    """Twice."""\n    return 2 * y\n')
     (tree / "b.py").write_text("y = 2\n")
     monkeypatch.setattr(compiled, "PACKAGE_ROOT", tree)
-    digests = []
-    for edit in (None, ("b.py", "y = 3\n"), ("robots/a.py", "x = 1  # a comment\n")):
-        if edit:
-            (tree / edit[0]).write_text(edit[1])
+    monkeypatch.setenv("CONTINUUM_GYM_PRECOMPILED_DIR", str(tmp_path / "no-set"))
+
+    def digest_after(path, text):
+        (tree / path).write_text(text)
         compiled.source_digest.cache_clear()
-        digests.append(compiled.source_digest())
-    compiled.source_digest.cache_clear()
-    assert len(set(digests)) == 3
+        return compiled.source_digest()
+
+    try:
+        first = digest_after("b.py", "y = 2\n")
+        kept = [digest_after("robots/a.py", '"""Module a, edited."""\n# a comment\nx = 1  # one\n\n\n'
+                                            'def f(y):\n    """Twice, edited."""\n    return 2 * y  # the same\n'),
+                digest_after("b.py", "\n\ny = 2\n")]  # code moved down by two lines
+        changed = [digest_after("b.py", "y = 3\n"), digest_after("robots/a.py", "x = 1\n")]
+    finally:
+        compiled.source_digest.cache_clear()
+    assert kept == [first, first]
+    assert len({first, *changed}) == 3
+
+
+def test_a_manifests_hashes_are_reused_only_for_unchanged_bytes(tmp_path, monkeypatch):
+    (tmp_path / "a.py").write_text("x = 1\n")
+    monkeypatch.setattr(compiled, "PACKAGE_ROOT", tmp_path)
+    hashes = compiled.source_hashes()
+    assert hashes["a.py"][1] == compiled.code_hash(b"x = 1  # comment\n") != compiled.code_hash(b"x = 2\n")
+    raw = hashes["a.py"][0]
+    assert compiled.source_hashes({"a.py": [raw, "from the manifest"]})["a.py"] == [raw, "from the manifest"]
+    assert compiled.source_hashes({"a.py": ["other bytes", "from the manifest"]}) == hashes
 
 
 def test_switch_names_the_variable_and_its_values(monkeypatch):
