@@ -270,6 +270,7 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     this env (computed once and cached for a variant), each method and ``headroom_closed``.
     """
     from continuum_gym.evaluation.benchmark import metadata
+    from continuum_gym.evaluation.comparison import add_improvement, add_training
     from continuum_gym.evaluation.references import load_references
 
     spec = get_spec(env_id)
@@ -287,6 +288,9 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     for name, runs in learned:  # which algorithm, and over how many seeds, beside a learned row's metrics
         if name in table:
             table[name].update(algo=runs[0].algo, n_seeds=len(runs))
+    add_improvement(spec, table, results, [name for name, _ in learned])
+    add_training(table, [(name, [Path(run.source).parent for run in runs
+                                 if run.source and Path(run.source).name == "model.zip"]) for name, runs in learned])
     described = {name: {"runs": len(runs), "env_kwargs": [run.env_kwargs for run in runs]} for name, runs in methods}
     meta = metadata(spec, split, episodes, grid, environment, ignored, described)
     meta["skipped"] = skipped
@@ -387,6 +391,14 @@ def skipped_notes(skipped: dict) -> str:
     return f"\n**Skipped** (not in the table above):\n{lines}\n"
 
 
+def comparison_notes(env_id: str, table: dict) -> str:
+    """Markdown of the learned rows' probability of improvement and training cost, after the tables."""
+    from continuum_gym.evaluation.comparison import comparison_markdown
+
+    text = comparison_markdown(get_spec(env_id), table)
+    return f"\n{text}" if text else ""
+
+
 def parse_env_kwargs(text: str | None) -> dict:
     """The ``--env-kwargs`` JSON object, or a named error."""
     if text is None:
@@ -434,7 +446,8 @@ def run(args) -> int:
             split=args.split, progress=not args.no_progress)
         summary[env_id] = table
         meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
-        report.append(markdown(env_id, table, results) + skipped_notes(meta[env_id]["skipped"]))
+        report.append(markdown(env_id, table, results) + comparison_notes(env_id, table)
+                      + skipped_notes(meta[env_id]["skipped"]))
         for path in draw(env_id, results, table, policies, out):
             print(f"wrote {path}")
     seconds = time.perf_counter() - started

@@ -114,23 +114,115 @@ def draw_coverage_maps(spec: EnvSpec, results: dict, table: dict, path: Path) ->
     return path
 
 
+def metric_axis(metric, prefix: str = "", sep: str = ", ") -> str:
+    """An axis label naming the metric, its unit ("dimensionless" if it has none) and the better direction."""
+    unit = metric.display_unit or metric.unit or "dimensionless"
+    return f"{prefix}{metric.label} ({unit}){sep}{_direction(metric.higher_is_better)}"
+
+
+def _seed_band(values: np.ndarray, reps: int = 1000, seed: int = 0) -> tuple:
+    """(mean, low, high) over axis 0 of (seeds, points): the 95 % percentile-bootstrap CI of the mean over seeds."""
+    mean = values.mean(axis=0)
+    if values.shape[0] < 2:
+        return mean, mean, mean
+    rng = np.random.default_rng(seed)
+    draws = values[rng.integers(values.shape[0], size=(reps, values.shape[0]))].mean(axis=1)
+    return mean, np.percentile(draws, 2.5, axis=0), np.percentile(draws, 97.5, axis=0)
+
+
+def learning_curves(policies: dict, env_id: str, metric: str) -> dict:
+    """{method: (steps (points,), values (seeds, points), elapsed seconds (seeds, points) or None)} of the runs'
+    ``evaluations.npz`` (and ``wall_clock.csv``), over the evaluations every seed of the method has."""
+    from continuum_gym.evaluation.comparison import read_wall_clock
+
+    out = {}
+    for method, runs in policies.get(env_id, {}).items():
+        curves = [(run, np.load(run / "evaluations.npz")) for run in runs if (run / "evaluations.npz").exists()]
+        if not curves:
+            continue
+        common = sorted(set.intersection(*(set(data["timesteps"].tolist()) for _, data in curves)))
+        if not common:
+            continue
+        values, clocks = [], []
+        for run, data in curves:
+            index = {int(step): k for k, step in enumerate(data["timesteps"])}
+            values.append([data[metric][index[step]] for step in common])
+            clock = read_wall_clock(run)
+            if clock is not None:
+                at = dict(zip(clock[0].tolist(), clock[1].tolist()))
+                clocks.append([at.get(step, np.nan) for step in common])
+        elapsed = np.array(clocks) if len(clocks) == len(curves) else None
+        out[method] = (np.array(common), np.array(values), elapsed)
+    return out
+
+
 def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path, env_id: str | None = None) -> Path | None:
-    """Held-out headline metric against environment steps, one line per run of ``env_id`` (``spec``'s env)."""
-    curves = [(method, run) for method, runs in policies.get(env_id or spec.env_id, {}).items() for run in runs
-              if (run / "evaluations.npz").exists()]
+    """Validation headline metric of each learned row, mean over its seeds with a 95 % bootstrap CI, against
+    environment steps and, when the runs record it (``wall_clock.csv``), against wall-clock seconds."""
+    metric = spec.metric(spec.headline_metric)
+    curves = learning_curves(policies, env_id or spec.env_id, metric.name)
     if not curves:
         return None
     plt = _pyplot()
-    metric = spec.metric(spec.headline_metric)
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for method, run in curves:
-        data = np.load(run / "evaluations.npz")
-        ax.plot(data["timesteps"], data[metric.name], label=f"{method} ({run.name.split('_')[-1]})")
-    ax.set(xlabel="environment steps", ylabel=f"{metric.axis_label()} (held-out)",
-           title=f"{spec.short_name}: learning curves")
-    ax.legend(fontsize=7)
+    timed = all(elapsed is not None for _, _, elapsed in curves.values())
+    fig, axes = plt.subplots(1, 2 if timed else 1, figsize=(11 if timed else 6.5, 4.4), squeeze=False)
+    for method, (steps, values, elapsed) in curves.items():
+        mean, low, high = _seed_band(values)
+        label = f"{method} ({values.shape[0]} seed{'s' if values.shape[0] > 1 else ''})"
+        line, = axes[0, 0].plot(steps, mean, label=label)
+        axes[0, 0].fill_between(steps, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+        if timed:
+            clock = np.nanmean(elapsed, axis=0)
+            axes[0, 1].plot(clock, mean, color=line.get_color(), label=label)
+            axes[0, 1].fill_between(clock, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+    ylabel = metric_axis(metric, "validation ", "\n")
+    axes[0, 0].set(xlabel="environment steps (summed over the vector env)", ylabel=ylabel,
+                   title="against environment steps", xlim=(0, None))
+    if timed:
+        axes[0, 1].set(xlabel="wall-clock since the run started (s), mean over seeds", ylabel=ylabel,
+                       title="against wall-clock", xlim=(0, None))
+    axes[0, 0].legend(fontsize=7, title="mean; band: 95 % CI over seeds", title_fontsize=7)
+    fig.suptitle(f"{spec.short_name}: learning curves on the training-time validation tasks", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def draw_performance_profiles(spec: EnvSpec, results: dict, path: Path, reps: int = 500) -> Path | None:
+    """rliable performance profiles of every row: the fraction of (run, episode) scores better than tau, for
+    tau over the headline metric's range, with 95 % stratified-bootstrap bands (non-grid task sets; ``reps``
+    resamples: 500 keep ``make demo`` within its minute, the bands are a picture, the table has the CIs)."""
+    from rliable import library
+
+    from continuum_gym.evaluation.comparison import headline_scores
+
+    metric = spec.metric(spec.headline_metric)
+    scores = {method: headline_scores(spec, results, method) for method in results}
+    if not scores:
+        return None
+    sign = 1.0 if metric.higher_is_better else -1.0  # rliable counts scores above tau: flip a lower-is-better metric
+    values = np.concatenate([s.ravel() for s in scores.values()])
+    taus = np.linspace(values.min(), values.max(), 101)
+    caller_state = np.random.get_state()  # rliable draws from numpy's global generator (see statistics.py)
+    np.random.seed(0)
+    try:
+        profiles, bands = library.create_performance_profile({m: sign * s for m, s in scores.items()},
+                                                             sign * taus, reps=reps)
+    finally:
+        np.random.set_state(caller_state)
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for method in scores:
+        line, = ax.plot(taus, profiles[method], label=method)
+        ax.fill_between(taus, bands[method][0], bands[method][1], color=line.get_color(), alpha=0.2, linewidth=0)
+    relation = ">" if metric.higher_is_better else "<"
+    ax.set(xlabel=f"threshold \u03c4: {metric_axis(metric)}",
+           ylabel=f"fraction of runs x episodes\nwith {metric.name} {relation} \u03c4 (higher is better)",
+           title=f"{spec.short_name}: performance profiles on held-out tasks")
+    ax.legend(fontsize=7, title="band: 95 % CI", title_fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
 
@@ -142,5 +234,6 @@ def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path) -> 
     paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png"),
              draw_traces(spec, results, out / f"{short}_{spec.trace_task}_trace.png"),
              draw_coverage_maps(spec, results, table, out / f"{short}_coverage_maps.png"),
-             draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png", env_id)]
+             draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png", env_id),
+             draw_performance_profiles(spec, results, out / f"{short}_performance_profiles.png")]
     return [path for path in paths if path is not None]

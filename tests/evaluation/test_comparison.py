@@ -1,0 +1,122 @@
+"""Probability of improvement, training cost and learning curves of the reference runs (``reference-runs/``).
+
+The reference runs are part of the repository: these tests read them, and ``continuum-gym evaluate
+--policies reference-runs`` must find every row of the reference table in that layout.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rliable import metrics
+
+from continuum_gym.evaluation.comparison import (
+    IMPROVEMENT,
+    TRAINING,
+    _improvement,
+    probability_of_improvement,
+    read_wall_clock,
+    training_cost,
+)
+from continuum_gym.evaluation.evaluate import discover_policies, evaluate_methods
+from continuum_gym.evaluation.figures import draw_learning_curves, learning_curves
+from continuum_gym.envs.spec import get_spec
+
+ROOT = Path(__file__).resolve().parents[2]
+REFERENCE = ROOT / "reference-runs"
+OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
+VIEW = "ContinuumGym/ViewTracking-v0"
+#: The reference table's learned rows per env: {method: (algo, seeds)}.
+ROWS = {OCCLUSION: {"residual_projected_gradient": 5, "residual_projected_gradient_sac": 5,
+                    "residual_projected_gradient_td3": 5, "pure_rl": 3, "pure_rl_sac": 3},
+        VIEW: {"residual_dimension_reduced": 5, "residual_dimension_reduced_sac": 5,
+               "residual_dimension_reduced_td3": 5, "pure_rl": 3, "pure_rl_sac": 3}}
+
+
+def test_the_vectorised_improvement_is_rliables_definition():
+    rng = np.random.default_rng(3)
+    for runs_x, runs_y, tasks in ((5, 1, 40), (3, 4, 7), (1, 1, 12)):
+        x = rng.normal(size=(runs_x, tasks)).round(1)  # rounded: ties occur and count one half
+        y = rng.normal(size=(runs_y, tasks)).round(1)
+        assert _improvement(x, y) == pytest.approx(metrics.probability_of_improvement(x, y), abs=1e-12)
+
+
+def test_probability_of_improvement_direction_ties_and_interval():
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=(1, 50))
+    better = probability_of_improvement(y + 1.0, y)
+    assert better["mean"] == 1.0 and better["ci_low"] == 1.0
+    same = probability_of_improvement(y, y)
+    assert same["mean"] == 0.5 and same["ci_low"] == same["ci_high"] == 0.5
+    x = y + rng.normal(scale=2.0, size=(5, 50))
+    up, down = probability_of_improvement(x, y), probability_of_improvement(x, y, higher_is_better=False)
+    assert up["mean"] + down["mean"] == pytest.approx(1.0)  # no ties: lower-is-better is the complement
+    assert 0.0 <= up["ci_low"] < up["mean"] < up["ci_high"] <= 1.0
+    assert probability_of_improvement(x, y, seed=1) != probability_of_improvement(x, y, seed=2)
+    assert probability_of_improvement(x, y, seed=1) == probability_of_improvement(x, y, seed=1)
+    with pytest.raises(ValueError, match="same tasks"):
+        probability_of_improvement(x, y[:, :10])
+
+
+def test_reference_runs_hold_every_row_of_the_table_with_curves_and_wall_clock():
+    found = discover_policies(REFERENCE)
+    assert set(found) == set(ROWS)
+    for env_id, rows in ROWS.items():
+        assert {method: len(runs) for method, runs in found[env_id].items()} == rows
+        for runs in found[env_id].values():
+            for run in runs:
+                cost = training_cost(run)
+                assert cost["env_steps"] >= 1_000_000 and 60 < cost["wall_clock_s"] < 1500
+                steps, elapsed = read_wall_clock(run)
+                with np.load(run / "evaluations.npz") as data:
+                    assert steps.tolist() == data["timesteps"].tolist()  # one time per evaluation
+                assert np.all(np.diff(elapsed) > 0)
+
+
+def test_learning_curves_of_the_reference_runs_against_steps_and_wall_clock(tmp_path):
+    spec = get_spec(VIEW)
+    policies = discover_policies(REFERENCE)
+    curves = learning_curves(policies, VIEW, spec.headline_metric)
+    assert set(curves) == set(ROWS[VIEW])
+    steps, values, elapsed = curves["residual_dimension_reduced_sac"]
+    assert values.shape == elapsed.shape == (5, len(steps)) and steps[-1] == 1_000_000
+    assert curves["residual_dimension_reduced"][0][-1] == 3_006_464  # PPO's 3M budget, whole rollouts
+    path = draw_learning_curves(spec, policies, tmp_path / "curves.png", VIEW)
+    assert path.is_file() and path.stat().st_size < 150_000
+
+
+def test_evaluate_on_the_reference_layout_gives_every_learned_row_its_algo_seeds_improvement_and_cost():
+    """One seed of each row (the layout, not the numbers: validation split, one episode per task set)."""
+    found = discover_policies(REFERENCE)
+    policies = {OCCLUSION: {method: runs[:1] for method, runs in found[OCCLUSION].items()}}
+    table, _, meta = evaluate_methods(OCCLUSION, [], policies, episodes=1, split="validation", progress=False,
+                                      references=False)
+    assert not meta["skipped"]
+    for method in ROWS[OCCLUSION]:
+        row = table[method]
+        assert row["algo"] == (method.rsplit("_", 1)[1] if method.endswith(("_sac", "_td3")) else "ppo")
+        assert row["n_seeds"] == 1
+        assert row[IMPROVEMENT]["over"] == "projected_gradient" and 0.0 <= row[IMPROVEMENT]["mean"] <= 1.0
+        assert row[TRAINING]["env_steps_per_run"][0] >= 1_000_000
+    assert IMPROVEMENT not in table["projected_gradient"] and TRAINING not in table["minimum_norm"]
+
+
+def _script(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_wall_clock_sums_every_report_across_a_restart(tmp_path):
+    collect = _script("collect_wall_clock")
+    progress = tmp_path / "progress.csv"
+    progress.write_text("timesteps,time_this_iter_s,time_total_s,iterations_since_restore\n"
+                        "100,10.0,10.0,1\n200,5.0,15.0,2\n"  # killed after 200; resumed from a checkpoint:
+                        "300,20.0,20.0,1\n400,4.0,24.0,2\n")
+    rows = collect.wall_clock_rows(progress)
+    assert [r["elapsed_s"] for r in rows] == [10.0, 15.0, 35.0, 39.0]
+    assert [r["session"] for r in rows] == [0, 0, 1, 1]
