@@ -33,7 +33,8 @@ tree is better; below 0.95 is flagged. ``noise`` is the larger of the two trees'
 repeats, (worst - best) / best: a flag inside the noise is weak evidence. Units marked ``(derived)``
 (differences or restatements of other rows) are hidden unless ``--all`` and never flagged;
 ``(control)`` rows time the same code in both trees (the plain-numpy references, Gymnasium's
-CartPole), so their speed shows how much the machine itself drifted. Peak RSS per tree is the ``peak_rss_mib`` key (minimum over repeats).
+CartPole), so their speed shows how much the machine itself drifted. Peak RSS per tree is the ``peak_rss_mib`` key
+(minimum over repeats).
 
 Other jobs on the machine: before each timed run the harness waits (``--idle-wait`` s at most) until
 other processes use fewer than ``--idle-below`` cores, sampled from /proc/stat for a second; during
@@ -87,6 +88,7 @@ from revisions import (  # noqa: E402
     tree_env,
     working_tree_fingerprint,
 )
+
 
 def busy_cpu_seconds() -> float:
     """CPU seconds the whole machine has spent busy since boot (all cores; /proc/stat)."""

@@ -4,7 +4,8 @@
 
 JSON keys (steps per second): ``single.<id>``, ``cartpole``, ``sync64.<id>``, ``native.<id>.<N>``, plus
 ``profile.<id>`` (microseconds per step spent in the compiled kernel, the core wrapper, the env API and
-Gymnasium's wrappers) and ``guard.off`` / ``guard.on`` (OcclusionAvoidance N=64 under random residual actions, visibility guard off / on).
+Gymnasium's wrappers) and ``guard.off`` / ``guard.on`` (OcclusionAvoidance N=64 under random residual actions,
+visibility guard off / on).
 ``units`` maps each key (pattern) to its unit; ``source`` is the ``continuum_gym`` that was timed.
 The memory of a 4096-robot vector env is ``memory.py``'s: measured here, after the rows above, it would
 include what the allocator kept from them.

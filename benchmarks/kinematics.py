@@ -116,8 +116,8 @@ def main(argv=None) -> int:
     record("endoscope_fk_jacobian_batch4096", "endoscope FK+Jacobian, batch 4096 (per robot)",
            best_seconds(lambda: endo.fk_jacobian(qs_endo), n(20)) / BATCH, endo_ref, "numpy, single")
     or_numpy = best_seconds(lambda: overlap_ratio_numpy(p_a, R_a, p_b, R_b, frustum), n(100))
-    record("overlap_ratio_single", "exact OR, single", best_seconds(lambda: overlap_ratio(p_a, R_a, p_b, R_b), n(20000)),
-           or_numpy, "numpy clipping, single")
+    record("overlap_ratio_single", "exact OR, single",
+           best_seconds(lambda: overlap_ratio(p_a, R_a, p_b, R_b), n(20000)), or_numpy, "numpy clipping, single")
     record("overlap_ratio_batch4096", "exact OR, batch 4096 (per pair)",
            best_seconds(lambda: overlap_ratio(p_a, R_a, P_b, RR_b), n(20)) / BATCH, or_numpy, "numpy clipping, single")
     record("overlap_ratio_vs_scipy", "exact OR vs scipy polytope reference",

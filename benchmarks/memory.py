@@ -9,7 +9,8 @@ every time. So every figure here comes from its own child process, which first b
 64-robot env of the same id (loading the compiled kernels the big one shares), then measures.
 
 JSON keys (MiB):
-- ``memory.native4096.<id>``: RSS added (each reading after ``malloc_trim``) by ``make_vec(num_envs=4096)`` + ``reset`` + one ``step``;
+- ``memory.native4096.<id>``: RSS added (each reading after ``malloc_trim``) by ``make_vec(num_envs=4096)`` +
+  ``reset`` + one ``step``;
 - ``held.native4096.<id>``: Python and numpy allocations (``tracemalloc``) the 4096-robot env still
   holds after its step (a second child: tracing costs memory of its own);
 - ``rss.import``: RSS after ``import continuum_gym``; ``rss.kernels.<id>``: RSS after the 64-robot

@@ -48,8 +48,10 @@ def soak(env_id: str, config: dict, steps: int, rows: int, rng: np.random.Genera
     obs, _ = env.reset(seed=int(rng.integers(2**31)))
     episodes = 0
     for _ in range(max(1, steps // rows)):
-        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
-        bad = ~np.isfinite(obs).all(axis=1) | ~np.isfinite(reward) | ((obs < space.low) | (obs > space.high)).any(axis=1)
+        actions = rng.uniform(-1, 1, env.action_space.shape).astype(np.float32)
+        obs, reward, terminated, truncated, info = env.step(actions)
+        outside = ((obs < space.low) | (obs > space.high)).any(axis=1)
+        bad = ~np.isfinite(obs).all(axis=1) | ~np.isfinite(reward) | outside
         for key, value in info.items():
             value = np.asarray(value)
             if not key.startswith("_") and value.dtype.kind == "f":

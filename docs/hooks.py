@@ -43,7 +43,8 @@ def _readme_section(match: re.Match) -> str:
 def _site_links(text: str) -> str:
     """Links relative to the repository root, made relative to docs/ (or absolute outside docs/)."""
     text = re.sub(r"\]\(docs/([^)]+)\)", r"](\1)", text)
-    return re.sub(r"\]\((?!https?:|#|[\w-]+\.md)([^)]+)\)", r"](https://github.com/continuum-gym/continuum-gym/blob/main/\1)", text)
+    return re.sub(r"\]\((?!https?:|#|[\w-]+\.md)([^)]+)\)",
+                  r"](https://github.com/continuum-gym/continuum-gym/blob/main/\1)", text)
 
 
 def _include_file(match: re.Match) -> str:

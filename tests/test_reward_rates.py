@@ -66,7 +66,6 @@ def test_without_a_baseline_the_rates_are_the_scaled_action_and_stop_at_a_joint_
     rate_terms(VIEW, 6)
     env = gym.make(VIEW, base_controller=None, task="static")
     env.reset(seed=0)
-    core = env.unwrapped.core
     action = np.array([0.1, -0.2, 0.05, 0.0, 0.15, -0.1], dtype=np.float32)
     _, _, _, _, info = env.step(action)
     expected = action.astype(float) * ACTION_SCALE  # pure RL: the action times its per-joint rate scale

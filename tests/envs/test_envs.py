@@ -90,7 +90,8 @@ def test_observations_stay_in_their_space_under_extreme_actions(env_id, kwargs):
     obs, _ = env.reset(seed=0)
     hit_limit = False
     for k in range(600):
-        action = np.sign(rng.uniform(-1, 1, env.action_space.shape)) if k % 50 < 40 else np.zeros(env.action_space.shape)
+        push = np.sign(rng.uniform(-1, 1, env.action_space.shape))
+        action = push if k % 50 < 40 else np.zeros(env.action_space.shape)
         if k % 100 < 10:  # push the first bend (and the stem) hard toward a limit
             action[0] = -1.0 if env_id == OCCLUSION else 1.0
             action[2] = 1.0
@@ -430,7 +431,7 @@ def test_sb3_adapter_resets_in_the_same_step():
     venv = ContinuumSB3VecEnv(VIEW, 3, max_episode_steps=5)
     venv.seed(0)
     obs = venv.reset()
-    for k in range(5):
+    for _ in range(5):
         obs, rewards, dones, infos = venv.step(np.zeros((3, 6), dtype=np.float32))
     assert dones.all()
     assert all("terminal_observation" in info and info["TimeLimit.truncated"] for info in infos)

@@ -175,7 +175,7 @@ def test_sb3_adapter_infos_actions_and_registered_ids():
         with pytest.raises(ValueError, match=r"shape \(2, 6\)"):
             venv.step_async(np.zeros((1, 12)))
         total = np.zeros(2)
-        for step in range(3):
+        for _ in range(3):
             _, rewards, dones, infos = venv.step(np.zeros((2, 6), dtype=np.float32))
             total += rewards
         assert dones.all()

@@ -113,7 +113,7 @@ def test_force_direction_is_gradient_of_distance(cone):
         lens = cone_coordinates(p, gamma, cone)["lens"]
         if not np.any(force) or math.hypot(lens[0], lens[1]) < 2e-3:  # FD error grows as h^2 / rho^2
             continue
-        grad_d = fd_gradient(lambda x: cone_coordinates(x, gamma, cone)["d"], p)
+        grad_d = fd_gradient(lambda x, gamma=gamma: cone_coordinates(x, gamma, cone)["d"], p)
         np.testing.assert_allclose(force / np.linalg.norm(force), grad_d, atol=1e-8)
         assert np.linalg.norm(grad_d) == pytest.approx(1.0, abs=1e-8)
         checked += 1
@@ -231,7 +231,8 @@ def _lens_point(r_slant, angle_from_axis, azimuth=0.0):
 def test_voi_formula_equals_printed_eq27():
     beta = CONE.beta
     for nu in np.linspace(0.01, 2 * beta - 0.01, 20):
-        printed = (1 + 1 / math.tan(beta) ** 2) ** 2 * math.tan(nu) ** 2 / (4 * (1 / math.tan(beta) + math.tan(nu)) ** 2)
+        printed = ((1 + 1 / math.tan(beta) ** 2) ** 2 * math.tan(nu) ** 2
+                   / (4 * (1 / math.tan(beta) + math.tan(nu)) ** 2))
         readable = (math.sin(nu) / (2 * math.sin(beta) * math.cos(nu - beta))) ** 2
         assert readable == pytest.approx(printed, rel=1e-12)
 

@@ -234,7 +234,8 @@ def test_identical_frustums_give_one():
 
 @pytest.mark.parametrize("roll", [0.0, 0.1, np.pi / 4, 1.0, np.pi / 2, np.pi, 2.5, -np.pi / 2])
 def test_roll_about_shared_axis(roll):
-    """Same apex and axis, rolled by φ: every cross-section is two concentric squares, OR = 2 / (1 + sin φ' + cos φ')."""
+    """Same apex and axis, rolled by φ: every cross-section is two concentric squares,
+    OR = 2 / (1 + sin φ' + cos φ')."""
     p, R = _random_pose(np.random.default_rng(4))
     R_b = R @ _rot([0.0, 0.0, roll])
     phi = roll % (np.pi / 2)
@@ -331,7 +332,8 @@ def test_batch_equals_looped_single_calls():
     p_a, R_a, p_b, R_b = (np.array([pair[k] for pair in pairs]).reshape((3, 4) + pairs[0][k].shape) for k in range(4))
     batch = overlap_ratio(p_a, R_a, p_b, R_b)
     assert batch.shape == (3, 4)
-    looped = np.array([[float(overlap_ratio(p_a[i, j], R_a[i, j], p_b[i, j], R_b[i, j])) for j in range(4)] for i in range(3)])
+    looped = np.array([[float(overlap_ratio(p_a[i, j], R_a[i, j], p_b[i, j], R_b[i, j])) for j in range(4)]
+                       for i in range(3)])
     np.testing.assert_array_equal(batch, looped)
 
 
@@ -356,7 +358,8 @@ def test_broadcasting_one_pose_against_many():
 def test_numba_entry_point_callable_from_compiled_code():
     @njit
     def twice(p_a, R_a, p_b, R_b):
-        return overlap_ratio_nb(p_a, R_a, p_b, R_b, 1.0, 0.03, 0.12) + overlap_ratio_nb(p_b, R_b, p_a, R_a, 1.0, 0.03, 0.12)
+        return (overlap_ratio_nb(p_a, R_a, p_b, R_b, 1.0, 0.03, 0.12)
+                + overlap_ratio_nb(p_b, R_b, p_a, R_a, 1.0, 0.03, 0.12))
 
     pose = _case(OVERLAP_CASES[2])
     assert twice(*pose) == pytest.approx(2.0 * OVERLAP_CASES[2]["overlap_ratio"], abs=2 * TOL)
