@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup setup-test precompile demo test test-fast bench reproduce figures docs clean
+.PHONY: setup setup-test precompile demo test test-fast bench reproduce reference-results figures docs clean
 
 # The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
@@ -39,6 +39,11 @@ demo: setup
 
 reproduce: setup
 	$(BIN)/continuum-gym reproduce --out results/reproduce --json results/reproduce/reproduce.json
+
+# The docs' reference-results page (docs/reference-results.md, its JSON and docs/img/reference/) from the
+# committed reference-runs/: continuum-gym evaluate --policies reference-runs on the test split, then the page.
+reference-results: setup
+	$(BIN)/python scripts/reference_results.py
 
 # The pictures of the README and the environment pages (docs/img/), drawn by `continuum-gym render`.
 figures: setup
