@@ -16,7 +16,7 @@ _EXPORTS = {
     "TipTrajectory": "trajectories", "DaVinciTrajectory": "trajectories",
     "OcclusionAvoidanceEnv": "occlusion", "OcclusionAvoidanceVectorEnv": "occlusion", "OcclusionCore": "occlusion",
     "ViewTrackingEnv": "view_tracking", "ViewTrackingVectorEnv": "view_tracking", "ViewTrackingCore": "view_tracking",
-    "ContinuumSB3VecEnv": "sb3", "NamedRewardTerms": "vector",
+    "ContinuumSB3VecEnv": "sb3", "NamedRewardTerms": "vector", "ModelError": "model_error",
 }
 __all__ = ["ENV_IDS", "register_envs", *sorted(_EXPORTS)]
 

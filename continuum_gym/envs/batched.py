@@ -260,7 +260,7 @@ class BatchedCore(abc.ABC):
         self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._rates_wanted = bool(self._compiled_terms or self._numpy_terms)
-        self._step_call = KernelCall(self.step_kernel)
+        self._step_call = KernelCall(self.step_kernel if self._mismatch is None else self.mismatch_kernel())
 
     def __getstate__(self) -> dict:
         # numba's typed lists do not pickle; the slots are rebuilt from the registry on unpickling
@@ -278,7 +278,31 @@ class BatchedCore(abc.ABC):
 
     def kernel_args(self, actions: np.ndarray, active: np.ndarray) -> tuple:
         """The step kernel's bundles around the per-step ``actions`` (N or 1, k) and ``active`` (N,) uint8."""
-        return (self._state, actions, active, self._tasks, *self._model, self._env, self._custom, self._out)
+        return (self._state, actions, active, self._tasks, *self._model, self._env, self._custom, self._out,
+                *self._mismatch_args)
+
+    # ------------------------------------------------------------------ model error (envs/model_error.py)
+    #: The ``MismatchState`` of a core whose ``model_error`` is not "none" (then ``mismatch_kernel`` steps it).
+    _mismatch = None
+    _mismatch_args: tuple = ()  #: (its ``MismatchArrays``,), the step kernel's last bundle
+
+    def mismatch_kernel(self):
+        """The compiled step of this env under a model error (imported only when one is used)."""
+        raise NotImplementedError(f"{type(self).__name__} has no model-error step")
+
+    def _setup_mismatch(self, env: str, n_segments: int) -> None:
+        """Per-row model errors and plant state when ``config.model_error`` is not "none"."""
+        from continuum_gym.envs.model_error import MismatchState, is_active, with_model_error_info
+
+        if not is_active(self.config.model_error):
+            return
+        self._mismatch = MismatchState(self, env, self.dof, n_segments, self.substeps)
+        self._mismatch_args = (self._mismatch.arrays,)
+        self.info_fields = with_model_error_info(type(self).info_fields)
+
+    def _reset_mismatch(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
+        if self._mismatch is not None:
+            self._mismatch.reset(rows, task_ids, self.q[rows])
 
     def observe_rows(self, rows) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state.
@@ -388,7 +412,11 @@ class BatchedCore(abc.ABC):
         return RewardTerms.of_checked(self.terms[row, :len(self.reward_names)], self.reward_names)
 
     def sample_task_id(self, rng: np.random.Generator) -> int:
-        return int(rng.integers(0, self.task_count))
+        """A task id for a row's next episode from its generator (which also draws a randomised model error)."""
+        task_id = int(rng.integers(0, self.task_count))
+        if self._mismatch is not None:
+            self._mismatch.sample(rng)
+        return task_id
 
     def check_task_ids(self, task_ids: Any, count: int, name: str) -> np.ndarray:
         """``count`` task ids as int64: whole numbers in [0, task_count), else a named error."""

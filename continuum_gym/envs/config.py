@@ -52,7 +52,7 @@ MAX_RESIDUAL_SCALE = 10.0
 MAX_REWARD_WEIGHT = 1e6
 MAX_GRID = 401
 #: Keywords whose objects (robot, cone, da Vinci endoscope) may also be given as ``to_dict()`` writes them.
-OBJECT_KEYWORDS = ("robot", "cone", "davinci")
+OBJECT_KEYWORDS = ("robot", "cone", "davinci", "model_error")
 
 
 def spec(unit: str = "", doc: str = "", type_name: str = "") -> dict:
@@ -163,6 +163,7 @@ class EnvConfig:
     @classmethod
     def _build_object(cls, key: str, value: dict) -> Any:
         """Rebuild a robot, cone or da Vinci endoscope from its ``to_dict()`` (recorded tasks cannot be)."""
+        from continuum_gym.envs.model_error import ModelError
         from continuum_gym.geometry.lens_cone import LensCone
         from continuum_gym.robots import (
             ContinuumEndoscope,
@@ -170,7 +171,8 @@ class EnvConfig:
             MultiBackboneRobot,
         )
 
-        kinds = {"MultiBackboneRobot": MultiBackboneRobot, "LensCone": LensCone, "DaVinciEndoscope": DaVinciEndoscope}
+        kinds = {"MultiBackboneRobot": MultiBackboneRobot, "LensCone": LensCone, "DaVinciEndoscope": DaVinciEndoscope,
+                 "ModelError": ModelError}
         kind = value.pop("type")
         if kind == "ContinuumEndoscope":
             lower, upper = value.pop("joint_limits", (None, None))
@@ -301,6 +303,12 @@ class OcclusionConfig(EnvConfig):
     cone: Any = field(default=None, metadata=spec(
         doc="a `LensCone` (channel offset d_o, lens tilt alpha, half-angle beta, lens model); `None`: the paper's",
         type_name="LensCone or None"))
+    model_error: Any = field(default="none", metadata=spec(
+        doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
+            "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
+    randomize_model_error: bool = field(default=False, metadata=spec(
+        doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
+        type_name="bool"))
 
     def __post_init__(self) -> None:
         from continuum_gym.baselines.occlusion import OcclusionLimits
@@ -320,6 +328,7 @@ class OcclusionConfig(EnvConfig):
             set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
         set_(self, "lens_model", self.cone.lens_model)
         _check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
+        _check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
         if self.visibility_guard is not None:
             if isinstance(self.visibility_guard, str):
@@ -390,6 +399,12 @@ class ViewTrackingConfig(EnvConfig):
     davinci: Any = field(default=None, metadata=spec(
         doc="a `DaVinciEndoscope` (viewing angle alpha, view distance Le); `None`: the paper's 30-degree one",
         type_name="DaVinciEndoscope or None"))
+    model_error: Any = field(default="none", metadata=spec(
+        doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
+            "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
+    randomize_model_error: bool = field(default=False, metadata=spec(
+        doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
+        type_name="bool"))
 
     def __post_init__(self) -> None:
         from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
@@ -401,6 +416,7 @@ class ViewTrackingConfig(EnvConfig):
         elif not isinstance(self.davinci, DaVinciEndoscope):
             raise ValueError(f"davinci must be a DaVinciEndoscope or None; got {describe(self.davinci)}")
         _check_common(self, VIEW_TASKS, VIEW_TEST_ONLY)
+        _check_model_error(self, "view", 2)
         choice(self.residual_space, self.residual_spaces, "residual_space")
         if self.residual_space == "target" and self.base_controller is None:
             raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
@@ -421,6 +437,14 @@ class ViewTrackingConfig(EnvConfig):
                 for k, v in enumerate(values)))
         set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
+
+
+def _check_model_error(config: EnvConfig, env: str, n_segments: int) -> None:
+    from continuum_gym.envs.model_error import check_randomize, resolve_model_error
+
+    object.__setattr__(config, "model_error", resolve_model_error(config.model_error, env, n_segments))
+    object.__setattr__(config, "randomize_model_error", check_randomize(config.randomize_model_error,
+                                                                          config.model_error))
 
 
 def _resolve_robot(robot: Any, kind: type, env_id: str):

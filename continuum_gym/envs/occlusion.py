@@ -120,6 +120,7 @@ class OcclusionCore(BatchedCore):
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (dof + 1,), np.float32)
         n = self.num_envs
+        self._setup_mismatch("occlusion", self.robot.n_segments)
         self._setup_rewards()
         self.q = np.zeros((n, dof))
         self.gamma = np.zeros(n)
@@ -153,6 +154,11 @@ class OcclusionCore(BatchedCore):
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params
 
+    def mismatch_kernel(self):
+        from continuum_gym.envs.occlusion_mismatch import occlusion_mismatch_batch
+
+        return occlusion_mismatch_batch
+
     def joint_values(self) -> np.ndarray:
         """Every row's joints and, last, the endoscope's rotation gamma (N, dof + 1): the action's layout."""
         return np.concatenate([self.q, self.gamma[:, None]], axis=1)
@@ -166,6 +172,7 @@ class OcclusionCore(BatchedCore):
         fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)
         self.gamma[rows] = fresh.start_gamma
+        self._reset_mismatch(rows, task_ids)
         self.observe_rows(rows)
 
     def step_values(self) -> dict:

@@ -112,6 +112,7 @@ class ViewTrackingCore(BatchedCore):
         self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (obs_dim,), np.float32)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_DIM,), np.float32)
         n = self.num_envs
+        self._setup_mismatch("view", 2)
         self._setup_rewards()
         self.q = np.zeros((n, 6))
         self.steps = np.zeros(n, dtype=np.int64)
@@ -138,10 +139,16 @@ class ViewTrackingCore(BatchedCore):
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(), self.frustum.kernel_args()
 
+    def mismatch_kernel(self):
+        from continuum_gym.envs.view_mismatch import view_mismatch_batch
+
+        return view_mismatch_batch
+
     def reset_rows(self, rows, task_ids) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)
+        self._reset_mismatch(rows, task_ids)
         self.observe_rows(rows)
 
     def step_values(self) -> dict:

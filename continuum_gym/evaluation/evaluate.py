@@ -371,6 +371,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env-kwargs", default=None, metavar="JSON",
                         help="env keyword arguments (JSON object) the evaluated env is built with, e.g. the ones "
                              "--policy was trained with; physics keywords apply to every method")
+    parser.add_argument("--model-error", default=None, choices=("none", "mild", "severe"),
+                        help="evaluate every method on robots that differ from the model its controller uses "
+                             "(docs/model-error.md): the preset's error, fixed per task instance; the offline "
+                             "optimum stays the nominal task's")
     parser.add_argument("--split", default="test", choices=("validation", "test"),
                         help="task split: validation for model selection, test for final numbers (default)")
     parser.add_argument("--episodes", type=int, default=32, help="held-out episodes per task set (default 32)")
@@ -381,6 +385,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", nargs="+", default=None, help="environment ids (default: all, or the one of "
                                                                 "--policy's --env-kwargs)")
     parser.add_argument("--no-progress", action="store_true")
+
+
+def model_error_note(env_kwargs: dict) -> str:
+    """A line under the table naming the model error every method faced (empty without one)."""
+    error = env_kwargs.get("model_error", "none")
+    if error == "none":
+        return ""
+    return (f"\n**Model error: {error}** (docs/model-error.md): every method's controller uses the nominal model, "
+            "the robots move by true ones fixed per task instance; the offline optimum is the nominal task's.\n")
 
 
 def skipped_notes(skipped: dict) -> str:
@@ -421,6 +434,8 @@ def run(args) -> int:
         env_kwargs = parse_env_kwargs(args.env_kwargs)
         if (args.policy or env_kwargs) and len(env_ids) != 1:
             raise ValueError("--policy and --env-kwargs need one environment: pass --env <id>")
+        if args.model_error:  # a physics keyword of every env and method (its table notes it)
+            env_kwargs["model_error"] = args.model_error
         for env_id in env_ids:
             split_env_kwargs(get_spec(env_id), env_kwargs)
         unusable: dict = {}
@@ -446,7 +461,7 @@ def run(args) -> int:
             split=args.split, progress=not args.no_progress)
         summary[env_id] = table
         meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
-        report.append(markdown(env_id, table, results) + comparison_notes(env_id, table)
+        report.append(markdown(env_id, table, results) + model_error_note(env_kwargs) + comparison_notes(env_id, table)
                       + skipped_notes(meta[env_id]["skipped"]))
         for path in draw(env_id, results, table, policies, out):
             print(f"wrote {path}")
