@@ -2,7 +2,8 @@
 
 Kinematics: rotations orthonormal, Jacobians equal central finite differences, batched equals looped,
 for robots of 1-4 segments with any lengths, at random, exactly straight and joint-limit
-configurations. Environments: for random keyword arguments within their valid ranges, observations
+configurations. Environments: for random keyword arguments within their valid ranges (model errors
+included), observations
 stay in the observation space, rewards are finite and equal the sum of ``reward_terms``, and a zero
 residual gives the same trajectory whatever the residual scale (it is exactly the baseline).
 """
@@ -15,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import continuum_gym  # noqa: F401  (registers the ids)
+from continuum_gym.envs.model_error import ModelError
 from continuum_gym.robots import ContinuumEndoscope, MultiBackboneRobot
 
 SETTINGS = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -114,7 +116,22 @@ def env_kwargs(draw):
     else:
         kwargs["base_controller"] = draw(st.sampled_from(["dimension_reduced", "resolved_rate"]))
         kwargs["reward_weights"] = {"overlap": draw(st.floats(0.0, 10.0)), "overlap_bonus": draw(st.floats(0, 1))}
+    kwargs["model_error"] = draw(model_errors(env_id))
+    kwargs["randomize_model_error"] = kwargs["model_error"] in ("mild", "severe") and draw(st.booleans())
     return env_id, kwargs, draw(st.integers(0, 2**16))
+
+
+@st.composite
+def model_errors(draw, env_id):
+    """A preset or any ModelError within its fields' limits (issue 37)."""
+    kind = draw(st.sampled_from(["none", "mild", "severe", "custom"]))
+    if kind != "custom":
+        return kind
+    mounting = {"channel_offset_m": draw(st.floats(-2e-3, 2e-3)), "lens_angle_rad": draw(st.floats(-0.2, 0.2))} \
+        if env_id == OCCLUSION else {"camera_rotation_rad": tuple(draw(st.floats(-0.2, 0.2)) for _ in range(3))}
+    return ModelError(length_scale=draw(st.floats(0.5, 1.5)), backlash_rad=draw(st.floats(0.0, 0.5)),
+                      actuator_lag_s=draw(st.floats(0.0, 1.0)), joint_noise_rad=draw(st.floats(0.0, 0.1)),
+                      tip_noise_m=draw(st.floats(0.0, 0.01)), delay_steps=draw(st.integers(0, 20)), **mounting)
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -138,6 +155,9 @@ def test_env_invariants_over_valid_keyword_arguments(case):
     b, _ = other.reset(seed=seed)
     zero = np.zeros(env.action_space.shape, dtype=np.float32)
     for _ in range(20):
-        a, *_ = env.step(zero)
-        b, *_ = other.step(zero)
+        a, _, ended_a, cut_a, _ = env.step(zero)
+        b, _, ended_b, cut_b, _ = other.step(zero)
         np.testing.assert_array_equal(a, b)
+        assert (ended_a, cut_a) == (ended_b, cut_b)
+        if ended_a or cut_a:  # e.g. a true robot far from the model loses the tip at once
+            break
