@@ -32,9 +32,12 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.type_aliases import GymEnv
 
 from continuum_gym.evaluation.io import fsync_directory, temporary_files
 
@@ -79,7 +82,7 @@ def unit_name(step: int) -> str:
     return f"{PREFIX}{int(step):012d}"
 
 
-def list_units(folder) -> list[Unit]:
+def list_units(folder: Path | str) -> list[Unit]:
     """Published units in ``folder``, oldest first (temporary directories are not units)."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -117,9 +120,9 @@ def verify(unit: Unit) -> str | None:
     return None
 
 
-def find_resumable(folder) -> tuple[Unit | None, list[tuple[Unit, str]]]:
+def find_resumable(folder: Path | str) -> tuple[Unit | None, list[tuple[Unit, str]]]:
     """The newest verified unit (or ``None``) and, newest first, the damaged units above it with reasons."""
-    damaged = []
+    damaged: list[tuple[Unit, str]] = []
     for unit in reversed(list_units(folder)):
         problem = verify(unit)
         if problem is None:
@@ -128,7 +131,7 @@ def find_resumable(folder) -> tuple[Unit | None, list[tuple[Unit, str]]]:
     return None, damaged
 
 
-def legacy_unit(folder) -> Unit | None:
+def legacy_unit(folder: Path | str) -> Unit | None:
     """The single checkpoint of the layout before units (``latest.zip`` + ``state.json``), if present."""
     folder = Path(folder)
     if not (folder / LEGACY_MODEL).is_file() or not (folder / STATE).is_file():
@@ -140,7 +143,7 @@ def legacy_unit(folder) -> Unit | None:
     return Unit(folder, step, legacy=True)
 
 
-def remove_legacy_files(folder) -> None:
+def remove_legacy_files(folder: Path | str) -> None:
     """Delete the pre-unit checkpoint files (once a unit supersedes them)."""
     for name in LEGACY_FILES:
         path = Path(folder) / name
@@ -148,7 +151,7 @@ def remove_legacy_files(folder) -> None:
             path.unlink()
 
 
-def write_unit(folder, step: int, files: Mapping[str, Writer], state: dict) -> Unit:
+def write_unit(folder: Path | str, step: int, files: Mapping[str, Writer], state: dict) -> Unit:
     """Write, seal and publish the unit for ``step``; an existing unit of the same step is replaced.
 
     ``files`` maps each file name to the function that writes it; ``state`` goes into ``state.json``
@@ -207,7 +210,7 @@ def publish(staging: Path, final: Path) -> None:
     fsync_directory(final.parent)
 
 
-def prune(folder, keep: int) -> list[Path]:
+def prune(folder: Path | str, keep: int) -> list[Path]:
     """Delete all but the newest ``keep`` units; returns the deleted directories."""
     units = list_units(folder)
     doomed = units[:-keep] if keep > 0 else units
@@ -225,7 +228,7 @@ def discard(unit: Unit) -> None:
     _remove_tree(aside)
 
 
-def clean_temporary(folder) -> list[Path]:
+def clean_temporary(folder: Path | str) -> list[Path]:
     """Remove staging directories and temporary files left in ``folder`` by a killed writer."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -236,7 +239,7 @@ def clean_temporary(folder) -> list[Path]:
     return stale
 
 
-def model_files(model) -> dict[str, Writer]:
+def model_files(model: BaseAlgorithm) -> dict[str, Writer]:
     """Writers for what SB3 itself needs to continue: the model, a replay buffer, reward normaliser."""
     files: dict[str, Writer] = {MODEL: model.save}
     if isinstance(model, OffPolicyAlgorithm) and model.replay_buffer is not None:
@@ -247,9 +250,12 @@ def model_files(model) -> dict[str, Writer]:
     return files
 
 
-def load_model(unit: Unit, cls, env, **kwargs):
+def load_model(unit: Unit, cls: type[BaseAlgorithm], env: GymEnv | None, **kwargs: Any) -> BaseAlgorithm:
     """``cls.load`` the unit's model onto ``env`` (already wrapped in the unit's normaliser) with its replay buffer."""
-    model = cls.load(unit.file(MODEL), env=env, **kwargs)
+    path = unit.file(MODEL)
+    if path is None:
+        raise FileNotFoundError(f"checkpoint unit {unit.path} has no {MODEL}")
+    model = cls.load(path, env=env, **kwargs)
     replay = unit.file(REPLAY_BUFFER)
     if isinstance(model, OffPolicyAlgorithm) and replay is not None:
         model.load_replay_buffer(replay)
@@ -273,7 +279,7 @@ class CheckpointCallback(BaseCallback):
         clock: seconds, monotonic (for tests).
     """
 
-    def __init__(self, folder, freq_steps: int, minutes: float, keep: int,
+    def __init__(self, folder: Path | str, freq_steps: int, minutes: float, keep: int,
                  state: Callable[[], dict] | None = None, files: Callable[[], dict[str, Writer]] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()

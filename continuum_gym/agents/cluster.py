@@ -44,7 +44,7 @@ def token_source() -> str | None:
 def has_token() -> bool:
     """Whether Ray finds a token for this client (its own loader when it has one, else ``token_source``)."""
     try:
-        from ray._raylet import AuthenticationTokenLoader
+        from ray._raylet import AuthenticationTokenLoader  # type: ignore[attr-defined]  # compiled; not in its stub
 
         return bool(AuthenticationTokenLoader.instance().has_token(ignore_auth_mode=True))
     except Exception:  # noqa: BLE001  (a Ray without it: the same places by hand)
@@ -86,7 +86,7 @@ def enable_token_auth_if_available() -> bool:
     elif source is not None:
         os.environ[AUTH_MODE_VAR] = "token"
         try:  # Ray caches its config at import: refresh it, as Ray's helper does
-            from ray._raylet import Config
+            from ray._raylet import Config  # type: ignore[attr-defined]  # compiled; not in its stub
 
             Config.initialize("")
         except Exception:  # noqa: BLE001  (no such config in this Ray: the variable alone is what it reads)
@@ -153,7 +153,7 @@ def probe(address: str, timeout: float = PROBE_TIMEOUT_S) -> str | None:
     if "://" in address:  # Ray Client (ray://): no GCS handshake to try
         return None
     try:
-        from ray._raylet import GcsClient
+        from ray._raylet import GcsClient  # type: ignore[attr-defined]  # compiled; not in its stub
         from ray.exceptions import AuthenticationError
     except ImportError:
         return None
@@ -187,9 +187,10 @@ def connect(address: str | None, runtime_env: dict | None = None) -> None:
     try:
         from ray.exceptions import AuthenticationError
     except ImportError:  # a Ray without token authentication
-        AuthenticationError = ConnectionError  # noqa: N806
+        AuthenticationError = ConnectionError  # type: ignore[misc, assignment]  # noqa: N806  (the fallback class)
     remote = address not in (None, "", "local")
     if remote:
+        assert address is not None  # remote: a non-empty address
         # Token mode without a token: Ray's client aborts the process at its first call, so say it here.
         if enable_token_auth_if_available() and not has_token():
             raise ClusterConnectionError(connection_message(address, f"{AUTH_MODE_VAR}=token but no token found"))
@@ -202,6 +203,7 @@ def connect(address: str | None, runtime_env: dict | None = None) -> None:
     except (ConnectionError, AuthenticationError) as error:
         if not remote:
             raise
+        assert address is not None  # remote: a non-empty address
         raise ClusterConnectionError(connection_message(address, str(error).strip() or type(error).__name__)) \
             from error
 

@@ -3,18 +3,25 @@
 from __future__ import annotations
 
 import io
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from continuum_gym.envs.spec import get_spec
 from continuum_gym.evaluation.io import write_bytes_atomic
 
+if TYPE_CHECKING:
+    from stable_baselines3.common.callbacks import BaseCallback
+
 #: First validation-split task id of the training evaluation (ids EVAL_TASK_OFFSET .. + n_eval_episodes).
 EVAL_TASK_OFFSET = 0
 
 
-def make_eval_callback(env_id: str, env_kwargs, run_dir, freq: int, n_episodes: int, report=None, history=None):
+def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path, freq: int, n_episodes: int,
+                       report: Callable[[int, float], None] | None = None,
+                       history: Mapping[str, Iterable[float]] | None = None) -> BaseCallback:
     """Periodic evaluation on held-out validation tasks (fixed ids), logged to TensorBoard and evaluations.npz.
 
     The validation split, not the test split: a sweep selects its configuration on these numbers, and
@@ -30,7 +37,8 @@ def make_eval_callback(env_id: str, env_kwargs, run_dir, freq: int, n_episodes: 
 
     kwargs = {**env_kwargs, "task_split": "validation"}
     config_class = get_spec(env_id).config_class
-    if kwargs.get("task") in config_class.test_only_tasks:  # a paper's fixed task has no validation instances
+    # a paper's fixed task has no validation instances (test_only_tasks: a ClassVar of the concrete configs)
+    if kwargs.get("task") in config_class.test_only_tasks:  # type: ignore[attr-defined]
         kwargs["task"] = "random"
     core = make_core(env_id, n_episodes, **kwargs)
     task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)
@@ -61,7 +69,8 @@ def make_eval_callback(env_id: str, env_kwargs, run_dir, freq: int, n_episodes: 
 
         def write(self) -> None:
             buffer = io.BytesIO()
-            np.savez(buffer, **{k: np.asarray(v) for k, v in self.history.items()})
+            arrays: dict[str, Any] = {k: np.asarray(v) for k, v in self.history.items()}
+            np.savez(buffer, **arrays)
             write_bytes_atomic(path, buffer.getvalue())
 
         def evaluate(self):

@@ -6,12 +6,16 @@ policy's own output; here only the learner is prepared so that an untrained agen
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import cast
+
 import torch
 from stable_baselines3 import PPO, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 
 
-def _last_linear(module):
+def _last_linear(module: torch.nn.Module) -> torch.nn.Linear:
     layers = [m for m in module.modules() if isinstance(m, torch.nn.Linear)]
     if not layers:
         raise ValueError(f"no Linear layer in {type(module).__name__}")
@@ -19,16 +23,17 @@ def _last_linear(module):
 
 
 @torch.no_grad()
-def zero_init_residual(model) -> None:
+def zero_init_residual(model: BaseAlgorithm) -> None:
     """Make the deterministic action exactly 0 (the baseline's command) for every observation.
 
     PPO: the action net (mean of the Gaussian); SAC: ``actor.mu`` (tanh(0) = 0); TD3: the actor's last
     Linear (before tanh), copied into ``actor_target`` as ``td3/policies.py`` does at construction.
     """
+    layers: list[torch.nn.Linear]
     if isinstance(model, PPO):
-        layers = [model.policy.action_net]
+        layers = [cast(torch.nn.Linear, model.policy.action_net)]  # a Linear for Box action spaces
     elif isinstance(model, SAC):
-        layers = [model.actor.mu]
+        layers = [cast(torch.nn.Linear, model.actor.mu)]
     elif isinstance(model, TD3):
         layers = [_last_linear(model.actor.mu)]
     else:
@@ -40,13 +45,13 @@ def zero_init_residual(model) -> None:
         model.actor_target.load_state_dict(model.actor.state_dict())
 
 
-def actor_parameters(model):
+def actor_parameters(model: BaseAlgorithm) -> list[torch.nn.Parameter]:
     """The parameters that move the action (PPO: everything but the value head and log_std)."""
     if isinstance(model, PPO):
         policy = model.policy
         shared = list(policy.features_extractor.parameters()) + list(policy.mlp_extractor.policy_net.parameters())
         return shared + list(policy.action_net.parameters())
-    return list(model.actor.parameters())
+    return list(model.actor.parameters())  # type: ignore[attr-defined]  # SAC, TD3: an actor network
 
 
 class ActorBurnIn(BaseCallback):
@@ -68,14 +73,14 @@ class ActorBurnIn(BaseCallback):
         if self._snapshot is None:
             self._snapshot = [p.detach().clone() for p in actor_parameters(self.model)]
 
-    def save_snapshot(self, path) -> None:
+    def save_snapshot(self, path: Path | str) -> None:
         """Write the actor being restored (taken at training start unless given)."""
         if self._snapshot is None:
             raise RuntimeError("ActorBurnIn has no snapshot before training starts")
         torch.save([tensor.cpu() for tensor in self._snapshot], path)
 
     @staticmethod
-    def load_snapshot(path) -> list[torch.Tensor]:
+    def load_snapshot(path: Path | str) -> list[torch.Tensor]:
         return torch.load(path, weights_only=True)
 
     @torch.no_grad()

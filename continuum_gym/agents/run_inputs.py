@@ -18,12 +18,15 @@ import types
 import typing
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.validation import closest
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
 
 #: The packaged hyperparameter files, ``<algo>.yml``: one block per env id.
 HYPERPARAMS_DIR = Path(__file__).resolve().parent / "hyperparams"
@@ -122,7 +125,7 @@ def _mapping() -> tuple[str, Callable]:
     return "a mapping (or empty)", convert
 
 
-def schedule_initial(value, name: str) -> float:
+def schedule_initial(value: object, name: str) -> float:
     """The initial value of a number or ``lin_<x>`` schedule; ``ValueError`` naming ``name`` otherwise."""
     text = value[4:] if isinstance(value, str) and value.startswith("lin_") else value
     try:
@@ -242,12 +245,12 @@ def _name(thing) -> str:
     return getattr(thing, "__name__", None) or str(thing)
 
 
-def algorithm_parameters(cls) -> dict[str, inspect.Parameter]:
+def algorithm_parameters(cls: type[BaseAlgorithm]) -> dict[str, inspect.Parameter]:
     """Keyword arguments of ``cls.__init__`` a hyperparameter file may set."""
     return {name: p for name, p in inspect.signature(cls.__init__).parameters.items() if name not in TRAINER_SET}
 
 
-def check_hyperparams(block: dict, cls, algo: str, source: str) -> dict:
+def check_hyperparams(block: dict, cls: type[BaseAlgorithm], algo: str, source: str) -> dict:
     """A checked copy of a hyperparameter block (values converted where YAML typed them loosely).
 
     Raises ``ValueError`` ``"<source>: <key> must be <valid>; got <value>"`` for the first bad entry.
@@ -255,7 +258,7 @@ def check_hyperparams(block: dict, cls, algo: str, source: str) -> dict:
     parameters = algorithm_parameters(cls)
     valid = sorted(set(parameters) | set(RUN_KEYS))
     rules = {**_ALGO_RULES, **_PER_ALGO_RULES.get(algo, {}), **_RUN_RULES}
-    checked = {}
+    checked: dict[str, Any] = {}
     for key, value in block.items():
         if not isinstance(key, str):
             raise ValueError(f"{source}: hyperparameter names must be strings; got {key!r}")
@@ -297,7 +300,7 @@ def check_combination(algo: str, hp: dict, n_envs: int, source: str) -> None:
                              f"{hp.get('n_steps', 2048)} * {n_envs}")
 
 
-def whole_number(name: str, value, minimum: int = 1, maximum: int | None = None) -> int:
+def whole_number(name: str, value: object, minimum: int = 1, maximum: int | None = None) -> int:
     """``value`` (an int, an integral float or such a string) as an int in [minimum, maximum], else ``ValueError``."""
     try:
         number = _as_int(value)
@@ -309,11 +312,11 @@ def whole_number(name: str, value, minimum: int = 1, maximum: int | None = None)
     return number
 
 
-def seed_number(name: str, value) -> int:
+def seed_number(name: str, value: object) -> int:
     return whole_number(name, value, 0, MAX_SEED)
 
 
-def output_directory(name: str, out) -> Path:
+def output_directory(name: str, out: Path | str) -> Path:
     """``out`` as a path that is, or can become, a directory."""
     path = Path(out)
     for parent in (path, *path.parents):
@@ -325,7 +328,7 @@ def output_directory(name: str, out) -> Path:
     return path
 
 
-def load_hyperparams(algo: str, env_id: str, path=None) -> dict:
+def load_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
     """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``."""
     path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
     if not path.is_file():

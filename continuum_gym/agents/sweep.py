@@ -28,7 +28,9 @@ import os
 import socket
 import sys
 import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -57,7 +59,7 @@ SEARCH_KEYS = ("method", "num_samples", "scheduler", "asha", "space")
 TRAINER_KEYS = ("residual_scale", "burn_in_steps", "n_envs", "n_timesteps", "normalize_reward")
 
 
-def load_search(path, algo: str, env_id: str) -> dict:
+def load_search(path: Path | str, algo: str, env_id: str) -> dict:
     """Parse and validate a search-space YAML; unknown keys raise ``ValueError`` naming them."""
     if not Path(path).is_file():
         raise ValueError(f"--search must be a search-space YAML file; {str(path)!r} does not exist")
@@ -86,10 +88,10 @@ def load_search(path, algo: str, env_id: str) -> dict:
             "asha": dict(spec.get("asha") or {}), "space": space}
 
 
-def tune_space(search: dict, seeds):
+def tune_space(search: dict, seeds: Iterable[int]) -> dict[str, Any]:
     from ray import tune
 
-    space = {}
+    space: dict[str, Any] = {}
     for key, entry in search["space"].items():
         kind, values = next(iter(entry.items()))
         if kind == "grid":
@@ -111,7 +113,9 @@ def trial_tag(config: dict) -> str:
     return f"cfg{digest}_seed{config['seed']}"
 
 
-def run_trial(config, env_id: str, algo: str, base, steps, out, hp_file, report=None):
+def run_trial(config: dict[str, Any], env_id: str, algo: str, base: str | None, steps: int | None,
+              out: Path | str, hp_file: Path | str | None,
+              report: Callable[[int, float], None] | None = None) -> Path:
     """One trial = one ``train()`` run with the trial's overrides; resumes if its checkpoint exists."""
     overrides = {k: v for k, v in config.items() if k != "seed"}
     trial_dir = Path(out) / "trials" / trial_tag(config)
@@ -149,7 +153,8 @@ def _trainable(env_id, algo, base, steps, out, hp_file, plugin_modules=()):
     return trainable
 
 
-def check_sweep_arguments(seeds, steps, cpus_per_trial, out) -> tuple[list[int], int | None, float]:
+def check_sweep_arguments(seeds: Sequence[int], steps: float | None, cpus_per_trial: float,
+                          out: Path | str) -> tuple[list[int], int | None, float]:
     """(seeds, steps, cpus_per_trial) validated and ``out`` checked, else ``ValueError`` (``load_search``
     checks the search file)."""
     if not isinstance(seeds, (list, tuple)) or not seeds:
@@ -182,8 +187,10 @@ def trial_runtime_env() -> dict:
     return {"env_vars": env_vars} if env_vars else {}
 
 
-def sweep(env_id: str, algo: str, base, seeds, steps=None, search=None, address=None, cpus_per_trial=1, out="sweeps",
-          resume: bool = False, name: str | None = None, hyperparams=None, max_failures=2) -> dict:
+def sweep(env_id: str, algo: str, base: str | None, seeds: Sequence[int], steps: float | None = None,
+          search: Path | str | None = None, address: str | None = None, cpus_per_trial: float = 1,
+          out: Path | str = "sweeps", resume: bool = False, name: str | None = None,
+          hyperparams: Path | str | None = None, max_failures: int = 2) -> dict:
     """Run the sweep; returns the results summary (also written to ``<out>/<name>/``).
 
     Every argument is checked before Ray starts: ``ValueError`` naming the parameter and its range.
@@ -238,16 +245,20 @@ def _fit(tune, env_id, algo, base, seeds, steps, search_spec, cpus_per_trial, re
     return summarise(results, metric, mode, env_id, algo, sweep_dir, hp_file)
 
 
-def summarise(results, metric, mode, env_id: str, algo: str, sweep_dir: Path, hp_file=None) -> dict:
-    """Per-trial table, per-configuration statistics over seeds, best config in the trainer's YAML format."""
-    rows = []
+def summarise(results: Iterable[Any], metric: str, mode: str, env_id: str, algo: str, sweep_dir: Path,
+              hp_file: Path | str | None = None) -> dict:
+    """Per-trial table, per-configuration statistics over seeds, best config in the trainer's YAML format.
+
+    ``results`` is Ray Tune's ``ResultGrid`` (or any iterable of its ``Result``s).
+    """
+    rows: list[dict[str, Any]] = []
     for result in results:
         config = dict(result.config)
         value = (result.metrics or {}).get(metric)
         rows.append({"config": config, "seed": config.get("seed"), metric: value,
                      "timesteps": (result.metrics or {}).get("timesteps"), "error": repr(result.error) if result.error
                      else None})
-    groups = {}
+    groups: dict[str, list[float]] = {}
     for row in rows:
         key = json.dumps({k: v for k, v in row["config"].items() if k != "seed"}, sort_keys=True, default=float)
         if row[metric] is not None:
@@ -292,7 +303,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hyperparams", default=None, help="YAML keyed by env id (default: the packaged one)")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     base = None if (args.base or "").lower() == "none" else (args.base or _default_base(args.env))
     try:
         validate(args.env, args.algo, base)

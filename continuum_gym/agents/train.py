@@ -29,7 +29,9 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -52,6 +54,9 @@ from continuum_gym.evaluation.io import (
     write_text_atomic,
 )
 
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
 ALGOS = ("ppo", "sac", "td3")
 # Values of the run keys when a block leaves them out.
 RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000, "n_eval_episodes": 16,
@@ -62,19 +67,19 @@ class RunBusyError(RuntimeError):
     """Another process is training the same run directory."""
 
 
-def run_name(env_id: str, algo: str, base, seed: int) -> str:
+def run_name(env_id: str, algo: str, base: str | None, seed: int) -> str:
     short = env_id.split("/")[-1].split("-")[0]
     return f"{short}_{algo}_{base or 'pure_rl'}_seed{seed}"
 
 
-def resolve_hyperparams(algo: str, env_id: str, path=None) -> dict:
+def resolve_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
     """``load_hyperparams`` checked against the algorithm (``validation.check_hyperparams``)."""
     block = load_hyperparams(algo, env_id, path)
     source = f"{Path(path).name if path else f'{algo}.yml'} [{env_id}]"
     return check_hyperparams(block, _algo_class(algo), algo, source)
 
 
-def linear_schedule(value, name: str):
+def linear_schedule(value: float | str, name: str) -> float | Callable[[float], float]:
     """rl-zoo's ``lin_<x>``: decay linearly from x to 0 over the run (SB3 passes the remaining fraction)."""
     if not isinstance(value, str):
         return value
@@ -86,7 +91,7 @@ def linear_schedule(value, name: str):
     return LinearSchedule(initial, 0.0, 1.0)
 
 
-def validate(env_id: str, algo: str, base) -> str | None:
+def validate(env_id: str, algo: str, base: str | None) -> str | None:
     """The base controller's name; ``ValueError`` unless env_id is known, algo one of ``ALGOS`` and base a
     baseline of the env, a registered controller (a name or ``"module:name"``) or None."""
     from continuum_gym import registry
@@ -103,7 +108,7 @@ def validate(env_id: str, algo: str, base) -> str | None:
                          f"controller or none. {error}") from None
 
 
-def default_base(env_id: str):
+def default_base(env_id: str) -> str | None:
     """The base an id trains on by default: the one it was registered with, else its env's headline baseline."""
     registered = registered_kwargs(env_id)
     return registered["base_controller"] if "base_controller" in registered else get_spec(env_id).headline_baseline
@@ -123,7 +128,7 @@ def _git_commit():
         return None
 
 
-def save_model_atomic(model, path: Path) -> None:
+def save_model_atomic(model: BaseAlgorithm, path: Path) -> None:
     buffer = io.BytesIO()
     model.save(buffer)
     write_bytes_atomic(path, buffer.getvalue())
@@ -224,8 +229,10 @@ def learner_threads() -> dict:
     return {"torch": torch.get_num_threads(), "cores_visible": cores}
 
 
-def train(env_id: str, algo: str = "ppo", base="__default__", seed: int = 0, steps=None, out="runs", resume: bool = False,
-          hyperparams=None, progress: bool = True, command=None, n_envs=None, report=None) -> Path:
+def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed: int = 0, steps: int | None = None,
+          out: Path | str = "runs", resume: bool = False, hyperparams: Path | str | None = None, progress: bool = True,
+          command: str | None = None, n_envs: int | None = None,
+          report: Callable[[int, float], None] | None = None) -> Path:
     """Train one run; returns its directory. ``base=None`` trains pure RL; the default is the env's first base.
 
     ``steps`` is the total number of environment steps (summed over the vector env). Raises
@@ -429,7 +436,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     base = None if (args.base or "").lower() == "none" else (args.base or "__default__")
     try:
         validate(args.env, args.algo, None if base == "__default__" else base)
