@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.lens_cone import (
+    LensCone,
     cone_distance_slant_cs,
     lens_to_world_direction_cs,
     points_and_gamma,
@@ -53,7 +56,7 @@ class ForceField:
     p: float = 1.0
     q: float = 2.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         positive(self.d0, "d0", "m")
         positive(self.r_star, "r_star", "m")
         positive(self.f_star, "f_star", "N")
@@ -66,13 +69,13 @@ class ForceField:
 
     def kernel_args(self) -> FieldKernelArgs:
         """(d0, r_star, f_star, p, q, q == 2, 2p == 2): the bundle the force kernels read."""
-        return self._kernel_args
+        return self._kernel_args  # type: ignore[attr-defined]  # set in __post_init__ (not a dataclass field)
 
 
 DEFAULT_FIELD = ForceField()
 
 
-def resolve_field(field) -> ForceField:
+def resolve_field(field: ForceField | None) -> ForceField:
     if field is None:
         return DEFAULT_FIELD
     if not isinstance(field, ForceField):
@@ -194,7 +197,8 @@ def _force_batch(P, G, cone, field, out):
         out[i, 0], out[i, 1], out[i, 2] = force_kernel(P[i, 0], P[i, 1], P[i, 2], G[i], cone, field)
 
 
-def repulsive_force(points, gamma, cone=None, field=None) -> np.ndarray:
+def repulsive_force(points: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None,
+                    field: ForceField | None = None) -> np.ndarray:
     """Force (N) of eq (18) on world points (..., 3) in m, in {w}; gamma (rad) broadcasts."""
     cone = resolve_cone(cone)
     field = resolve_field(field)
@@ -204,7 +208,9 @@ def repulsive_force(points, gamma, cone=None, field=None) -> np.ndarray:
     return out.reshape(shape + (3,))
 
 
-def potential_gradient(robot: MultiBackboneRobot, q, gamma, cone=None, field=None, psps=PAPER_PSPS) -> np.ndarray:
+def potential_gradient(robot: MultiBackboneRobot, q: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None,
+                       field: ForceField | None = None,
+                       psps: Sequence[tuple[int, float]] = PAPER_PSPS) -> np.ndarray:
     """grad Pi = grad E - sum_i Jv_i^T f_i (eq 12) over the points subject to potential, shape (..., dof).
 
     Args:

@@ -24,6 +24,7 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.validation import (
     angle_in_open_interval,
@@ -80,7 +81,8 @@ class Frustum:
 
     def kernel_args(self) -> FrustumKernelArgs:
         """(tan_half, near (m), far (m)): the bundle the overlap kernels read."""
-        return FrustumKernelArgs(self._tan_half, self.near, self.far)
+        # _tan_half: set in __post_init__ (not a dataclass field)
+        return FrustumKernelArgs(self._tan_half, self.near, self.far)  # type: ignore[attr-defined]
 
     def to_dict(self) -> dict:
         """The constructor arguments as plain YAML/JSON values (rad, m)."""
@@ -94,7 +96,7 @@ class Frustum:
     @property
     def tan_half(self) -> float:
         """t = tan(full_angle / 2): the half-width of the cross-section per unit depth."""
-        return self._tan_half
+        return self._tan_half  # type: ignore[attr-defined]  # set in __post_init__ (not a dataclass field)
 
     @property
     def volume(self) -> float:
@@ -128,7 +130,7 @@ class Frustum:
             ]
         )
 
-    def vertices(self, p, R) -> np.ndarray:
+    def vertices(self, p: ArrayLike, R: ArrayLike) -> np.ndarray:
         """World coordinates of the 8 vertices for camera position ``p`` (..., 3) and rotation ``R`` (..., 3, 3).
 
         Returns shape (..., 8, 3), the batch shapes of ``p`` and ``R`` broadcast together.
@@ -137,7 +139,7 @@ class Frustum:
         R = as_rotations(R, "R")
         return p[..., None, :] + np.einsum("...ij,kj->...ki", R, self.local_vertices())
 
-    def halfspaces(self, p, R) -> np.ndarray:
+    def halfspaces(self, p: ArrayLike, R: ArrayLike) -> np.ndarray:
         """World half-spaces [n, b] (n unit, outward) with n·x + b <= 0 inside, shape (..., 6, 4).
 
         Rows are ordered near, far, +x, −x, +y, −y. ``n_w = R n`` and ``b_w = b − n_w·p``.
@@ -150,7 +152,7 @@ class Frustum:
         normals = np.broadcast_to(normals, offsets.shape + (3,))
         return np.concatenate([normals, offsets[..., None]], axis=-1)
 
-    def sample_uniform(self, n: int, rng) -> np.ndarray:
+    def sample_uniform(self, n: int, rng: np.random.Generator | int | None) -> np.ndarray:
         """``n`` points uniformly distributed in the frustum, in its own camera frame, shape (n, 3).
 
         paper-notes §2.4: z = (near³ + u (far³ − near³))^(1/3) with u ~ U(0, 1), then x, y ~ U(−t z, t z).

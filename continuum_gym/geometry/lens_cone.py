@@ -18,6 +18,7 @@ from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import (
@@ -50,7 +51,7 @@ class LensCone:
     beta: float = math.radians(27.5)
     lens_model: str = "literal"
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, "d_o", positive(self.d_o, "d_o", "m"))
         object.__setattr__(self, "alpha", angle_in_open_interval(self.alpha, "alpha", 0.0, math.pi / 2, "(0, pi/2)"))
         object.__setattr__(self, "beta", angle_in_open_interval(self.beta, "beta", 0.0, math.pi / 2, "(0, pi/2)"))
@@ -64,7 +65,7 @@ class LensCone:
 
     def kernel_args(self) -> ConeKernelArgs:
         """(d_o, alpha, beta, model): the bundle every cone kernel reads."""
-        return self._kernel_args
+        return self._kernel_args  # type: ignore[attr-defined]  # set in __post_init__ (not a dataclass field)
 
     def to_dict(self) -> dict:
         """The constructor arguments as plain YAML/JSON values (m, rad)."""
@@ -74,7 +75,7 @@ class LensCone:
 DEFAULT_CONE = LensCone()
 
 
-def resolve_cone(cone) -> LensCone:
+def resolve_cone(cone: LensCone | None) -> LensCone:
     """``None`` means the paper's cone; anything else must be a ``LensCone``."""
     if cone is None:
         return DEFAULT_CONE
@@ -171,7 +172,7 @@ def _cone_coordinates_batch(P, G, d_o, alpha, beta, model, out):
 
 
 # ---------------------------------------------------------------------- public functions
-def points_and_gamma(points, gamma) -> tuple[np.ndarray, np.ndarray, tuple]:
+def points_and_gamma(points: ArrayLike, gamma: ArrayLike) -> tuple[np.ndarray, np.ndarray, tuple]:
     """Validated world points (..., 3) in m and endoscope rotations gamma (rad), broadcast together and
     flattened: (P (n, 3), G (n,), batch shape)."""
     points = as_vectors(points, 3, "points")
@@ -186,7 +187,7 @@ def points_and_gamma(points, gamma) -> tuple[np.ndarray, np.ndarray, tuple]:
     return P, G, shape
 
 
-def cone_coordinates(points, gamma, cone=None):
+def cone_coordinates(points: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None) -> dict[str, np.ndarray]:
     """Cone coordinates of world points (m) for endoscope rotation ``gamma`` (rad).
 
     Returns a dict of arrays of the broadcast shape: ``d`` (m, eq 16, < 0 inside), ``r`` (m, eq 17),
@@ -205,7 +206,7 @@ def cone_coordinates(points, gamma, cone=None):
     }
 
 
-def centre_distance(tip, gamma, cone=None):
+def centre_distance(tip: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Tip-to-view-axis distance d_c (m, eq 25 read as rho_ee) and dd_c/dgamma (m/rad, paper-notes §1.3 item 10).
 
     Returns (d_c, dd_c_dgamma), each of the broadcast shape of tip[..., 0] and gamma.
@@ -218,7 +219,7 @@ def centre_distance(tip, gamma, cone=None):
     return dc.reshape(shape), grad.reshape(shape)
 
 
-def view_axis(gamma, cone=None):
+def view_axis(gamma: ArrayLike, cone: LensCone | None = None) -> np.ndarray:
     """Unit direction (..., 3) of the cone axis in {w}: Rz(gamma) (-sin alpha, 0, cos alpha)."""
     cone = resolve_cone(cone)
     gamma = np.asarray(gamma, dtype=np.float64)
@@ -227,7 +228,7 @@ def view_axis(gamma, cone=None):
     return np.stack([c * a[0], s * a[0], np.full_like(c, a[2])], axis=-1)
 
 
-def lens_origin(gamma, cone=None):
+def lens_origin(gamma: ArrayLike, cone: LensCone | None = None) -> np.ndarray:
     """World position (m) of the cone vertex: Rz(gamma)[0, d_o, 0] (literal) or [0, d_o, 0] (physical)."""
     cone = resolve_cone(cone)
     gamma = np.asarray(gamma, dtype=np.float64)
@@ -236,7 +237,7 @@ def lens_origin(gamma, cone=None):
     return np.stack([-np.sin(gamma) * cone.d_o, np.cos(gamma) * cone.d_o, np.zeros_like(gamma)], axis=-1)
 
 
-def lens_rotation(gamma, cone=None):
+def lens_rotation(gamma: ArrayLike, cone: LensCone | None = None) -> np.ndarray:
     """^wR_lens = (Ry(alpha) Rz(-gamma))^T, shape gamma.shape + (3, 3); its z column is ``view_axis``."""
     cone = resolve_cone(cone)
     gamma = np.asarray(gamma, dtype=np.float64)

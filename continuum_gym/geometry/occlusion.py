@@ -16,8 +16,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.lens_cone import (
+    LensCone,
     cone_distance_slant_cs,
     resolve_cone,
     to_lens_cs,
@@ -157,7 +159,7 @@ def _voi_single(q, gamma, robot, cone, n_per_segment):
     return True, voi, nu, r_e, r_max
 
 
-def occlusion_details(robot: MultiBackboneRobot, q, gamma, cone=None,
+def occlusion_details(robot: MultiBackboneRobot, q: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None,
                       n_per_segment: int = VOI_SAMPLES_PER_SEGMENT) -> dict:
     """VOI and its parts: dict of ``voi``, ``nu`` (rad), ``r_e`` (m, NaN without entry), ``r_max`` (m).
 
@@ -189,7 +191,8 @@ def occlusion_details(robot: MultiBackboneRobot, q, gamma, cone=None,
     return {key: out[:, k].reshape(shape) for k, key in enumerate(("voi", "nu", "r_e", "r_max"))}
 
 
-def visual_occlusion_index(robot: MultiBackboneRobot, q, gamma, cone=None) -> np.ndarray:
+def visual_occlusion_index(robot: MultiBackboneRobot, q: ArrayLike, gamma: ArrayLike,
+                           cone: LensCone | None = None) -> np.ndarray:
     """Visual Occlusion Index (eq 27, paper-notes §1.3 item 13) of shape q.shape[:-1] (0-d for one q).
 
     Args:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import threading
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.geometry.overlap_clipping import (  # noqa: F401  (used below; also importable from this module)
@@ -176,7 +177,8 @@ def _raise(code: int, index=None) -> None:
     raise ValueError(f"{name} {problem}{where}")
 
 
-def overlap_ratio(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> np.ndarray:
+def overlap_ratio(p_a: ArrayLike, R_a: ArrayLike, p_b: ArrayLike, R_b: ArrayLike,
+                  frustum: Frustum | None = None) -> np.ndarray:
     """Exact overlap ratio OR = vol(F_a ∩ F_b) / vol(F_a) of two camera frustums (paper-notes §2.4).
 
     Args:

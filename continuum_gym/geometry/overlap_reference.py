@@ -5,6 +5,7 @@ LP + half-space intersection + convex hull) and Monte Carlo. Slow; the tests com
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.geometry.overlap import ROTATION_TOL, resolve_frustum
@@ -29,7 +30,8 @@ def _pose(p, R, name_p: str, name_R: str) -> tuple[np.ndarray, np.ndarray]:
     return p, R
 
 
-def overlap_ratio_reference(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) -> float:
+def overlap_ratio_reference(p_a: ArrayLike, R_a: ArrayLike, p_b: ArrayLike, R_b: ArrayLike,
+                            frustum: Frustum | None = None) -> float:
     """OR of one pair by the polytope-library recipe of paper-notes §2.4 (slow; the test reference).
 
     Stacks the 12 world half-spaces A x + b <= 0, finds the Chebyshev centre with
@@ -59,7 +61,8 @@ def overlap_ratio_reference(p_a, R_a, p_b, R_b, frustum: Frustum | None = None) 
     return float(ConvexHull(intersection.intersections).volume / frustum.volume)
 
 
-def overlap_ratio_monte_carlo(p_a, R_a, p_b, R_b, n_samples: int, rng, frustum: Frustum | None = None) -> float:
+def overlap_ratio_monte_carlo(p_a: ArrayLike, R_a: ArrayLike, p_b: ArrayLike, R_b: ArrayLike, n_samples: int,
+                              rng: np.random.Generator | int | None, frustum: Frustum | None = None) -> float:
     """Monte-Carlo OR: the fraction of ``n_samples`` uniform samples of F_a that lie inside F_b.
 
     ``rng`` is a ``numpy.random.Generator`` or a seed. Standard error ≈ sqrt(OR (1 − OR) / n_samples).
