@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "camera_matrices", "view_matrix", "projection_matrix", "view_matrix_from_frame", "look_at_frame",
@@ -25,7 +26,7 @@ __all__ = [
 ]
 
 
-def _as_frame(p, R):
+def _as_frame(p: ArrayLike, R: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(p, dtype=np.float64).reshape(3)
     R = np.asarray(R, dtype=np.float64).reshape(3, 3)
     if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
@@ -33,7 +34,7 @@ def _as_frame(p, R):
     return p, R
 
 
-def view_matrix(p, R) -> tuple:
+def view_matrix(p: ArrayLike, R: ArrayLike) -> tuple:
     """pybullet view matrix (16 floats, column-major) of the camera frame (p, R) (module docstring)."""
     import pybullet
 
@@ -54,12 +55,13 @@ def projection_matrix(fov_y: float, aspect: float = 1.0, near: float = 1e-3, far
                                                farVal=float(far))
 
 
-def camera_matrices(p, R, fov_y, width: int, height: int, near=1e-3, far=0.3):
+def camera_matrices(p: ArrayLike, R: ArrayLike, fov_y: float, width: int, height: int, near: float = 1e-3,
+                    far: float = 0.3) -> tuple[tuple, tuple]:
     """(view, projection) for getCameraImage: camera frame (p, R), vertical FOV ``fov_y`` (rad), image W x H."""
     return view_matrix(p, R), projection_matrix(fov_y, width / height, near, far)
 
 
-def view_matrix_from_frame(p, R) -> np.ndarray:
+def view_matrix_from_frame(p: ArrayLike, R: ArrayLike) -> np.ndarray:
     """The same view matrix as ``view_matrix`` in numpy, (4, 4) row-major (``.T.ravel()`` is pybullet's layout).
 
     Rows are the OpenGL eye axes in {w}: x = R[:, 0], y (up) = -R[:, 1], z (backward) = -R[:, 2].
@@ -72,7 +74,8 @@ def view_matrix_from_frame(p, R) -> np.ndarray:
     return V
 
 
-def look_at_frame(eye, target, up=(0.0, 0.0, 1.0)):
+def look_at_frame(eye: ArrayLike, target: ArrayLike,
+                  up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """Camera frame (p, R) at ``eye`` looking at ``target`` with image-up as close to ``up`` as possible."""
     eye = np.asarray(eye, dtype=np.float64).reshape(3)
     z = np.asarray(target, dtype=np.float64).reshape(3) - eye
@@ -123,7 +126,7 @@ def fov_mask(width: int, height: int, fov_y: float, half_angle: float) -> np.nda
     return mask
 
 
-def quaternion_from_matrix(R) -> np.ndarray:
+def quaternion_from_matrix(R: ArrayLike) -> np.ndarray:
     """pybullet quaternion [x, y, z, w] of rotation matrices R (..., 3, 3) (Shepperd's method)."""
     R = np.asarray(R, dtype=np.float64)
     batch = R.shape[:-2]

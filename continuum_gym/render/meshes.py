@@ -6,8 +6,10 @@ Testable without pybullet; ``continuum_gym.render.scene`` turns them into pybull
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 #: The world z axis.
 E3 = np.array([0.0, 0.0, 1.0])
@@ -17,7 +19,7 @@ E3 = np.array([0.0, 0.0, 1.0])
 class Mesh:
     """Triangle mesh: vertices (n, 3), normals (n, 3), triangles (m, 3) int, optional uvs (n, 2)."""
 
-    def __init__(self, V, N, T, uv=None) -> None:
+    def __init__(self, V: ArrayLike, N: ArrayLike, T: ArrayLike, uv: ArrayLike | None = None) -> None:
         self.V = np.asarray(V, dtype=np.float64).reshape(-1, 3)
         N = np.asarray(N, dtype=np.float64).reshape(-1, 3)
         self.N = N / np.maximum(np.linalg.norm(N, axis=1, keepdims=True), 1e-300)
@@ -36,7 +38,7 @@ class Mesh:
         self.T[flip] = self.T[flip][:, [0, 2, 1]]
 
     @staticmethod
-    def merge(meshes):
+    def merge(meshes: Sequence[Mesh]) -> Mesh:
         offsets = np.cumsum([0] + [len(m.V) for m in meshes[:-1]])
         uv = None
         if all(m.uv is not None for m in meshes):
@@ -45,14 +47,16 @@ class Mesh:
                      np.concatenate([m.T + o for m, o in zip(meshes, offsets)]), uv)
 
 
-def lathe(profile, sides):
+def lathe(profile: Sequence[tuple[float, float, float, float]], sides: int) -> Mesh:
     """Surface of revolution about z from a profile of (r, z, n_r, n_z); r = 0 makes a pole vertex.
 
     Consecutive profile entries at the same (r, z) start a new smoothing group (a hard edge).
     """
     theta = 2.0 * math.pi * np.arange(sides) / sides
     c, s = np.cos(theta), np.sin(theta)
-    V, N, rings = [], [], []
+    V: list[ArrayLike] = []  # rings of vertices (arrays) and pole vertices (nested lists)
+    N: list[ArrayLike] = []
+    rings: list[np.ndarray] = []
     count = 0
     for r, z, nr, nz in profile:
         if r == 0.0:
@@ -76,7 +80,8 @@ def lathe(profile, sides):
     return Mesh(np.concatenate(V), np.concatenate(N), np.concatenate(T))
 
 
-def tube(radius, z0, z1, sides=12, bottom="round", top="round", cap_rings=2):
+def tube(radius: float, z0: float, z1: float, sides: int = 12, bottom: str = "round", top: str = "round",
+         cap_rings: int = 2) -> Mesh:
     """Tube of ``radius`` along z from z0 to z1; each end "round" (hemisphere), "flat" or "open"."""
     profile = []
 
@@ -97,19 +102,19 @@ def tube(radius, z0, z1, sides=12, bottom="round", top="round", cap_rings=2):
     return lathe(profile, sides)
 
 
-def link(radius, length, sides=8, top="round"):
+def link(radius: float, length: float, sides: int = 8, top: str = "round") -> Mesh:
     """A backbone link from z = 0 to ``length``: open at the bottom (inside the previous link's cap), a cone
     cap of height ``radius`` on top that closes the joint with the next link (or a flat top)."""
     return tube(radius, 0.0, length, sides=sides, bottom="open", top=top, cap_rings=0)
 
 
-def sphere(radius, center, sides=10, rings=3):
+def sphere(radius: float, center: ArrayLike, sides: int = 10, rings: int = 3) -> Mesh:
     m = tube(radius, 0.0, 0.0, sides=sides, cap_rings=rings)
     m.V += np.asarray(center, dtype=np.float64)
     return m
 
 
-def wires(segments, radius, sides=3, max_length=0.01):
+def wires(segments: ArrayLike, radius: float, sides: int = 3, max_length: float = 0.01) -> Mesh:
     """Thin open prisms along line segments (k, 2, 3): a wireframe as one mesh.
 
     Segments are split into pieces of at most ``max_length``: TinyRenderer scans each triangle's screen
@@ -139,7 +144,8 @@ def wires(segments, radius, sides=3, max_length=0.01):
     return Mesh(V.reshape(-1, 3), N.reshape(-1, 3), T.reshape(-1, 3))
 
 
-def grid_mesh(half_x, half_y, n=8, normal_sign=-1.0, uv_scale=1.0, two_sided=False, xs=None):
+def grid_mesh(half_x: float, half_y: float, n: int = 8, normal_sign: float = -1.0, uv_scale: float = 1.0,
+              two_sided: bool = False, xs: ArrayLike | None = None) -> Mesh:
     """Square grid in the plane z = 0 with uvs; normals along ``normal_sign`` z.
 
     ``xs`` (optional) gives the cell boundaries in x and y explicitly (then half = max |xs|).
@@ -166,14 +172,14 @@ def grid_mesh(half_x, half_y, n=8, normal_sign=-1.0, uv_scale=1.0, two_sided=Fal
     return Mesh(V, N, T, uv)
 
 
-def split_mesh(mesh, inner_half):
+def split_mesh(mesh: Mesh, inner_half: float) -> tuple[Mesh, Mesh]:
     """(triangles inside the square |x|, |y| <= inner_half, the others) of a mesh, as two meshes."""
     centre = mesh.V[mesh.T][:, :, :2].mean(axis=1)
     inside = np.all(np.abs(centre) <= inner_half, axis=1)
     return Mesh(mesh.V, mesh.N, mesh.T[inside], mesh.uv), Mesh(mesh.V, mesh.N, mesh.T[~inside], mesh.uv)
 
 
-def disk_and_frame(radius, half, cells=8):
+def disk_and_frame(radius: float, half: float, cells: int = 8) -> tuple[Mesh, Mesh]:
     """The square of half side ``half`` (z = 0, planar uvs, front faces toward -z) split into the grid
     cells that reach into the circle of ``radius`` (the disk) and the others (the frame).
 
@@ -189,7 +195,7 @@ def disk_and_frame(radius, half, cells=8):
     return Mesh(grid.V, grid.N, grid.T[inside], grid.uv), Mesh(grid.V, grid.N, grid.T[~inside], grid.uv)
 
 
-def quat_z_to(d):
+def quat_z_to(d: np.ndarray) -> np.ndarray:
     """Quaternions [x, y, z, w] (k, 4) rotating e_z onto the unit directions d (k, 3)."""
     q = np.empty((len(d), 4))
     q[:, 0] = -d[:, 1]
@@ -203,7 +209,7 @@ def quat_z_to(d):
     return q / n[:, None]
 
 
-def quaternion(R):
+def quaternion(R: np.ndarray) -> list[float]:
     """pybullet quaternion [x, y, z, w] of one rotation matrix (scalar fast path of quaternion_from_matrix)."""
     m00, m01, m02 = float(R[0, 0]), float(R[0, 1]), float(R[0, 2])
     m10, m11, m12 = float(R[1, 0]), float(R[1, 1]), float(R[1, 2])
@@ -225,5 +231,5 @@ def quaternion(R):
     return [x / n for x in q]
 
 
-def unit(v):
+def unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)

@@ -7,10 +7,17 @@ of the view axis (the inscribed disk of the square image with vertical field of 
 
 from __future__ import annotations
 
-import numpy as np
+from typing import TYPE_CHECKING
 
-from continuum_gym.geometry.lens_cone import resolve_cone
+import numpy as np
+from numpy.typing import ArrayLike
+
+from continuum_gym.geometry.lens_cone import LensCone, resolve_cone
 from continuum_gym.validation import as_finite, integer
+
+if TYPE_CHECKING:
+    from continuum_gym.render.occlusion_scene import OcclusionScene
+    from continuum_gym.robots import MultiBackboneRobot
 
 __all__ = ["pixel_occlusion", "clear_scene_cache"]
 
@@ -37,7 +44,8 @@ def clear_scene_cache() -> None:
         _SCENES.popitem()[1].close()
 
 
-def pixel_occlusion(robot, q, gamma, cone=None, resolution=128, scene=None):
+def pixel_occlusion(robot: MultiBackboneRobot, q: ArrayLike, gamma: ArrayLike, cone: LensCone | None = None,
+                    resolution: int = 128, scene: OcclusionScene | None = None) -> float | np.ndarray:
     """Fraction of the endoscope image's circular field of view covered by the robot (segmentation mask).
 
     Args:

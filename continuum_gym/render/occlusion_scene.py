@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from continuum_gym.geometry.lens_cone import lens_origin, lens_rotation, resolve_cone
+from continuum_gym.geometry.lens_cone import LensCone, lens_origin, lens_rotation, resolve_cone
 from continuum_gym.render.camera import fov_mask
 from continuum_gym.render.meshes import (
     E3,
@@ -27,6 +30,10 @@ from continuum_gym.render.scene import (
     external_frame,
     resolution,
 )
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.occlusion import OcclusionCore
+    from continuum_gym.robots import MultiBackboneRobot
 
 
 # ====================================================================== paper 000: occlusion
@@ -71,9 +78,12 @@ class OcclusionScene(Scene):
     cameras = CAMERAS_OCCLUSION
     robot_groups = ("robot",)
 
-    def __init__(self, robot=None, cone=None, tissue_distance=0.065, robot_radius=0.0015, n_per_segment: int = 8,
-                 shaft_radius=0.002, tissue="view", tissue_half_size=0.05, circular_fov=True, near=1e-3, far=0.3,
-                 external_camera=None, texture_seed=0, cache_background=True) -> None:
+    def __init__(self, robot: MultiBackboneRobot | None = None, cone: LensCone | None = None,
+                 tissue_distance: float = 0.065, robot_radius: float = 0.0015, n_per_segment: int = 8,
+                 shaft_radius: float = 0.002, tissue: str | None = "view", tissue_half_size: float = 0.05,
+                 circular_fov: bool = True, near: float = 1e-3, far: float = 0.3,
+                 external_camera: Mapping[str, Any] | None = None, texture_seed: int = 0,
+                 cache_background: bool = True) -> None:
         from continuum_gym.robots import MultiBackboneRobot
 
         self.robot = MultiBackboneRobot() if robot is None else robot
@@ -97,10 +107,10 @@ class OcclusionScene(Scene):
         self.tissue_mode = tissue
         self.circular_fov = bool(circular_fov)
         self.cache_background = bool(cache_background)
-        self._backgrounds = {}
+        self._backgrounds: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}  # (width, height, groups) -> rgb, depth
         self.near, self.far = float(near), float(far)
         self.fov_y = 2.0 * self.cone.beta
-        ext = dict(target=(-0.012, 0.0, 0.035), distance=0.16, azimuth=-40.0, elevation=5.0, fov=45.0)
+        ext: dict[str, Any] = dict(target=(-0.012, 0.0, 0.035), distance=0.16, azimuth=-40.0, elevation=5.0, fov=45.0)
         ext.update(external_camera or {})
         self.external_camera = ext
         self._external = external_frame(ext["target"], ext["distance"], ext["azimuth"], ext["elevation"])
@@ -110,8 +120,8 @@ class OcclusionScene(Scene):
         except BaseException:
             self.close()
             raise
-        self.q = None
-        self.gamma = None
+        self.q: np.ndarray | None = None
+        self.gamma: float | None = None
         self.update(self.robot.home, 0.0)
 
     # ------------------------------------------------------------------ build
@@ -170,15 +180,15 @@ class OcclusionScene(Scene):
 
     # ------------------------------------------------------------------ state
     @classmethod
-    def from_core(cls, core) -> OcclusionScene:
+    def from_core(cls, core: OcclusionCore) -> OcclusionScene:
         """The scene of an OcclusionAvoidance core: its robot and cone."""
         return cls(robot=core.robot, cone=core.cone)
 
-    def show_row(self, core, row: int) -> None:
+    def show_row(self, core: OcclusionCore, row: int) -> None:
         """Move the bodies to row ``row`` of ``core``: its joints and endoscope rotation."""
         self.update(core.q[row], core.gamma[row])
 
-    def update(self, q, gamma) -> None:
+    def update(self, q: ArrayLike, gamma: float) -> None:
         """Move every body to configuration ``q`` (dof,) and endoscope rotation ``gamma`` (rad)."""
         self._check_open()
         q = np.asarray(q, dtype=np.float64)
@@ -219,16 +229,17 @@ class OcclusionScene(Scene):
         self.gamma = gamma
 
     # ------------------------------------------------------------------ cameras
-    def camera_pose(self, camera="endoscope"):
+    def camera_pose(self, camera: str = "endoscope") -> tuple[np.ndarray, np.ndarray]:
         """(p, R) of ``camera`` in {w} (z optical axis, x image right, y image down)."""
         if camera == "endoscope":
+            assert self.gamma is not None  # set by update(), which __init__ calls
             R = lens_rotation(self.gamma, self.cone) * np.array([-1.0, -1.0, 1.0])
             return lens_origin(self.gamma, self.cone), R
         if camera == "external":
             return self._external[0].copy(), self._external[1].copy()
         raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
 
-    def render(self, camera="external", width: int = 128, height: int = 128) -> np.ndarray:
+    def render(self, camera: str = "external", width: int = 128, height: int = 128) -> np.ndarray:
         """RGB image (height, width, 3) uint8 from ``"external"`` or ``"endoscope"``."""
         if camera == "endoscope":
             return self._endoscope(width, height, False)[0]
@@ -236,7 +247,7 @@ class OcclusionScene(Scene):
             raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
         return self._external_image(width, height, {"robot", "shaft", "tissue", "tissue_frame", "cone"})
 
-    def endoscope_frame(self, width: int = 128, height: int = 128):
+    def endoscope_frame(self, width: int = 128, height: int = 128) -> tuple[np.ndarray, float]:
         """(endoscope RGB image (height, width, 3) uint8, pixel occlusion of that image size).
 
         With the cached background (``cache_background``, ``tissue="view"``) both come from one robot
@@ -300,7 +311,7 @@ class OcclusionScene(Scene):
             cached = self._backgrounds[key] = (rgb, depth)
         return cached
 
-    def segmentation(self, width: int = 128, height: int = 128, fov_only=False) -> np.ndarray:
+    def segmentation(self, width: int = 128, height: int = 128, fov_only: bool = False) -> np.ndarray:
         """Boolean (height, width): endoscope-image pixels showing the robot.
 
         The tissue is hidden, so robot parts beyond it count as well. With ``fov_only`` only the pixels
@@ -318,7 +329,7 @@ class OcclusionScene(Scene):
         """Boolean (height, width): endoscope pixels whose ray is within beta of the view axis."""
         return fov_mask(int(width), int(height), self.fov_y, self.cone.beta)
 
-    def pixel_occlusion(self, resolution=128) -> float:
+    def pixel_occlusion(self, resolution: int = 128) -> float:
         """Fraction of the circular field of view covered by the robot at the current state (square image of
         side ``resolution``; tissue and shaft excluded, robot parts beyond the tissue included)."""
         mask = self.segmentation(resolution, resolution, fov_only=True)

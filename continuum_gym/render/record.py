@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -87,7 +88,7 @@ def _strip(values, width: int, height: int, vmax: float = 1.0) -> np.ndarray:
 
 def _external_camera(args) -> dict:
     """The external-camera flags given, validated (each error names its flag)."""
-    camera = {}
+    camera: dict[str, Any] = {}
     if args.azimuth is not None:
         camera["azimuth"] = number(args.azimuth, "--azimuth", unit="deg")
     if args.elevation is not None:
@@ -127,7 +128,7 @@ def _write_gif(path: Path, frames, duration_ms: float) -> None:
     images[0].save(path, save_all=True, append_images=images[1:], duration=duration_ms, loop=0, optimize=True)
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     try:
         spec = get_spec(args.env)
         out = Path(args.out)
@@ -157,8 +158,8 @@ def run(args) -> int:
         print(f"continuum-gym render: --task / policy env kwargs: {error}", file=sys.stderr)
         return 2
     env.reset(seed=seed)
-    core = env.unwrapped.core
-    scene = env.unwrapped.scene()
+    core = env.unwrapped.core  # type: ignore[attr-defined]  # a continuum-gym env (envs.single): its core
+    scene = env.unwrapped.scene()  # type: ignore[attr-defined]
     if external_camera:
         scene.set_external_camera(**external_camera)
     still = out.suffix == ".png"
@@ -168,8 +169,8 @@ def run(args) -> int:
     step = 0
     while True:
         obs = core.obs[0].astype(np.float32)
-        action = np.zeros(env.action_space.shape, np.float32) if model is None else \
-            model.predict(obs, deterministic=True)[0]
+        action = (np.zeros(env.action_space.shape, np.float32)  # type: ignore[type-var]  # a Box: shape is set
+                  if model is None else model.predict(obs, deterministic=True)[0])
         _, _, terminated, truncated, info = env.step(action)
         history.append(info[spec.record_value])
         step += 1
@@ -194,7 +195,7 @@ def run(args) -> int:
     elif out.suffix == ".gif":
         _write_gif(out, frames, 1000 / fps)
     else:
-        imageio.mimsave(out, frames, fps=fps)
+        imageio.mimsave(out, frames, fps=fps)  # type: ignore[arg-type]  # list[ArrayLike] is invariant; read only
     env.close()
     what = f"the state after step {step}" if still else f"{len(frames)} frames"
     print(f"wrote {out}: {what}, mean {spec.record_value} {np.mean(history):.3f}")

@@ -28,8 +28,11 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from types import ModuleType
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.render.camera import camera_matrices, look_at_frame
 from continuum_gym.render.meshes import E3, unit
@@ -44,7 +47,7 @@ CAMERAS_OCCLUSION = ("external", "endoscope")
 CAMERAS_VIEW_TRACKING = ("external", "endoscope", "davinci")
 
 
-def import_pybullet():
+def import_pybullet() -> tuple[ModuleType, ModuleType]:
     try:
         import pybullet
         from pybullet_utils import bullet_client
@@ -60,8 +63,12 @@ class Scene:
     #: lighting (TinyRenderer defaults are ambient 0.6, diffuse 0.35, specular 0.05)
     _light = dict(lightAmbientCoeff=0.45, lightDiffuseCoeff=0.55, lightSpecularCoeff=0.08, shadow=0)
     _light_external = dict(lightAmbientCoeff=0.7, lightDiffuseCoeff=0.45, lightSpecularCoeff=0.08, shadow=0)
+    # Declared by every scene class: its cameras (a class attribute) and the external camera (in __init__).
+    cameras: tuple[str, ...]
+    external_camera: dict[str, Any]
+    _external: tuple[np.ndarray, np.ndarray]
 
-    def __init__(self, texture_seed=0, texture_size=512, texture_features=1.0) -> None:
+    def __init__(self, texture_seed: int = 0, texture_size: int = 512, texture_features: float = 1.0) -> None:
         p, bullet_client = import_pybullet()
         self._p = p
         self._client = bullet_client.BulletClient(connection_mode=p.DIRECT)
@@ -75,7 +82,8 @@ class Scene:
         self._texture_features = float(texture_features)
         self._texture = None
         self._lut = np.zeros(1, dtype=bool)
-        self._spheres = ([], np.zeros((0, 3)), np.zeros(0))
+        #: bounding spheres of the bodies that may be culled: (body ids, centres (k, 3), radii (k,))
+        self._spheres: tuple[list[int], np.ndarray, np.ndarray] = ([], np.zeros((0, 3)), np.zeros(0))
         self.closed = False
 
     # ------------------------------------------------------------------ building
@@ -209,7 +217,9 @@ class Scene:
             rgb[seg < 0] = CAVITY
         return rgb
 
-    def set_external_camera(self, target=None, distance=None, azimuth=None, elevation=None, fov=None) -> None:
+    def set_external_camera(self, target: ArrayLike | None = None, distance: float | None = None,
+                            azimuth: float | None = None, elevation: float | None = None,
+                            fov: float | None = None) -> None:
         """Move the external camera; the values given replace those of ``external_camera`` (the rest stay).
 
         Args:
@@ -286,20 +296,21 @@ class Scene:
             pass
 
 
-def resolution(width: int, height: int):
+def resolution(width: int, height: int) -> tuple[int, int]:
     w, h = int(width), int(height)
     if w != width or h != height or w < 1 or h < 1 or w > 4096 or h > 4096:
         raise ValueError(f"width and height must be integers in [1, 4096]; got {width!r} x {height!r}")
     return w, h
 
 
-def corner_angle(fov_y, width: int, height: int):
+def corner_angle(fov_y: float, width: int, height: int) -> float:
     """Angle between the optical axis and the image corners' rays, plus 2 pixels of slack."""
     t = math.tan(0.5 * fov_y)
     return math.atan(t * math.hypot(1.0, width / height)) + 2.0 * fov_y / height
 
 
-def external_frame(target, distance, azimuth_deg, elevation_deg):
+def external_frame(target: ArrayLike, distance: float, azimuth_deg: float,
+                   elevation_deg: float) -> tuple[np.ndarray, np.ndarray]:
     az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
     target = np.asarray(target, dtype=np.float64)
     eye = target + distance * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])

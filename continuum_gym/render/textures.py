@@ -19,7 +19,7 @@ def _fractal(rng, size, slope, k_min=0.0, k_max=np.inf):
 
 
 @functools.lru_cache(maxsize=4)
-def cached_texture(size: int, seed: int, features):
+def cached_texture(size: int, seed: int, features: float) -> np.ndarray:
     image = _tissue_texture(size, seed, features)
     image.flags.writeable = False
     return image
@@ -52,7 +52,7 @@ def _tissue_texture(size, seed, features):
     return np.clip(color * 255.0, 0, 255).astype(np.uint8)
 
 
-def bmp_bytes(image) -> bytes:
+def bmp_bytes(image: np.ndarray) -> bytes:
     """24-bit uncompressed BMP of an (h, w, 3) uint8 RGB image (pybullet's stb_image reads it; writing it
     takes a millisecond where PNG encoding takes ~150 ms)."""
     h, w, _ = image.shape

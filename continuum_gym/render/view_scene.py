@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.render.meshes import (
     Mesh,
@@ -21,6 +25,11 @@ from continuum_gym.render.scene import (
     Scene,
     external_frame,
 )
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.view_tracking import ViewTrackingCore
+    from continuum_gym.geometry.frustum import Frustum
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
 
 # ====================================================================== paper 001: view tracking
@@ -50,9 +59,11 @@ class ViewTrackingScene(Scene):
     cameras = CAMERAS_VIEW_TRACKING
     robot_groups = ("endoscope",)
 
-    def __init__(self, endoscope=None, davinci=None, frustum=None, endoscope_radius=0.003, davinci_radius=0.004,
-                 n_per_segment: int = 6, tissue_height=None, tissue_half_size=1.0, near=1e-3, far=1.5,
-                 external_camera=None, texture_seed=0) -> None:
+    def __init__(self, endoscope: ContinuumEndoscope | None = None, davinci: DaVinciEndoscope | None = None,
+                 frustum: Frustum | None = None, endoscope_radius: float = 0.003, davinci_radius: float = 0.004,
+                 n_per_segment: int = 6, tissue_height: float | None = None, tissue_half_size: float = 1.0,
+                 near: float = 1e-3, far: float = 1.5, external_camera: Mapping[str, Any] | None = None,
+                 texture_seed: int = 0) -> None:
         from continuum_gym.geometry.frustum import Frustum
         from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
@@ -80,7 +91,7 @@ class ViewTrackingScene(Scene):
         self.tissue_height = float(tissue_height)
         self.near, self.far = float(near), float(far)
         self.fov_y = float(self.frustum.full_angle)
-        ext = dict(target=(0.0, 0.04, 0.10), distance=0.30, azimuth=-50.0, elevation=-25.0, fov=45.0)
+        ext: dict[str, Any] = dict(target=(0.0, 0.04, 0.10), distance=0.30, azimuth=-50.0, elevation=-25.0, fov=45.0)
         ext.update(external_camera or {})
         self.external_camera = ext
         self._external = external_frame(ext["target"], ext["distance"], ext["azimuth"], ext["elevation"])
@@ -90,8 +101,8 @@ class ViewTrackingScene(Scene):
         except BaseException:
             self.close()
             raise
-        self.q = None
-        self.q_davinci = None
+        self.q: np.ndarray | None = None
+        self.q_davinci: np.ndarray | None = None
         self.update(self.endoscope.home, self.davinci.home)
 
     def _build(self, r, r_dv, tissue_half_size):
@@ -124,15 +135,15 @@ class ViewTrackingScene(Scene):
         self._ids = self._stem + self._links + self._davinci + self._frusta["endoscope"] + self._frusta["davinci"]
 
     @classmethod
-    def from_core(cls, core) -> ViewTrackingScene:
+    def from_core(cls, core: ViewTrackingCore) -> ViewTrackingScene:
         """The scene of a ViewTracking core: its continuum endoscope, da Vinci and frustum."""
         return cls(endoscope=core.robot, davinci=core.davinci, frustum=core.frustum)
 
-    def show_row(self, core, row: int) -> None:
+    def show_row(self, core: ViewTrackingCore, row: int) -> None:
         """Move the bodies to row ``row`` of ``core``: its joints and the da Vinci's configuration."""
         self.update(core.q[row], core.davinci_configuration(row))
 
-    def update(self, q, q_davinci) -> None:
+    def update(self, q: ArrayLike, q_davinci: ArrayLike) -> None:
         """Move the continuum endoscope to ``q`` (6,) and the da Vinci endoscope to ``q_davinci`` (4,)."""
         self._check_open()
         q = np.asarray(q, dtype=np.float64)
@@ -157,7 +168,7 @@ class ViewTrackingScene(Scene):
         self.q, self.q_davinci = q.copy(), q_dv.copy()
         self._poses = {"endoscope": (p_cam, R_cam), "davinci": (p_dv, R_dv)}
 
-    def camera_pose(self, camera="endoscope"):
+    def camera_pose(self, camera: str = "endoscope") -> tuple[np.ndarray, np.ndarray]:
         """(p, R) of ``camera`` in {w} (z optical axis, x image right, y image down)."""
         if camera in ("endoscope", "davinci"):
             p, R = self._poses[camera]
@@ -166,7 +177,7 @@ class ViewTrackingScene(Scene):
             return self._external[0].copy(), self._external[1].copy()
         raise ValueError(f"camera must be one of {self.cameras}; got {camera!r}")
 
-    def render(self, camera="external", width: int = 128, height: int = 128) -> np.ndarray:
+    def render(self, camera: str = "external", width: int = 128, height: int = 128) -> np.ndarray:
         """RGB image (height, width, 3) uint8 from ``"external"``, ``"endoscope"`` or ``"davinci"``."""
         p_cam, R_cam = self.camera_pose(camera)
         if camera == "external":
