@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 CACHE_PATH = Path(__file__).resolve().parents[1] / "data" / "optimum_cache.json"
 
 
 # ====================================================================== cache
-def load_optimum_cache(path=None) -> dict:
+def load_optimum_cache(path: Path | str | None = None) -> dict:
     """The shipped offline optima (nested dict; see the module docstring), or those at ``path``."""
     path = CACHE_PATH if path is None else Path(path)
     if not path.exists():
@@ -18,9 +19,9 @@ def load_optimum_cache(path=None) -> dict:
     return json.loads(path.read_text())
 
 
-def cache_value(cache: dict, key: str):
+def cache_value(cache: dict, key: str) -> Any:
     """A dotted key of the cache, e.g. ``cache_value(cache, "coverage.optimum_percent")``."""
-    value = cache
+    value: Any = cache
     for part in key.split("."):
         if not isinstance(value, dict) or part not in value:
             raise KeyError(f"optimum cache has no key {key!r}")

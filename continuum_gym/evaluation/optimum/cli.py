@@ -6,6 +6,7 @@ import argparse
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from continuum_gym.envs.spec import ENV_SPECS, OCCLUSION_SPEC, VIEW_SPEC
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH, load_optimum_cache
@@ -26,7 +27,7 @@ TASKS = tuple(task for tasks in ENV_TASKS.values() for task in tasks)
 
 
 # ====================================================================== CLI
-def resolve_tasks(env, task: str = "all"):
+def resolve_tasks(env: str, task: str = "all") -> tuple[str, ...]:
     """Tasks to run for an env id (or ``all``) and a task name (or ``all``); ValueError names the bad one."""
     valid_envs = (*ENV_TASKS, "all")
     if env not in valid_envs:
@@ -61,7 +62,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     if args.env not in (*ENV_TASKS, "all"):
         return run_variant(args)
     try:
@@ -90,7 +91,7 @@ def run(args) -> int:
     from continuum_gym.evaluation.optimum.view import coverage_optimum
 
     progress = not args.no_progress
-    results = {}
+    results: dict[str, Any] = {}
     started = time.perf_counter()
     if "coverage" in tasks:
         results["coverage"] = coverage_optimum(args.grid, workers=workers, progress=progress,
@@ -126,7 +127,7 @@ def run(args) -> int:
     return 0
 
 
-def run_variant(args) -> int:
+def run_variant(args: argparse.Namespace) -> int:
     """A user's registered id: the ceiling of its own variant, as ``evaluate`` uses it (computed once, cached).
 
     The variant's robot, cone or endoscope and limits come from the keywords the id was registered with;

@@ -11,7 +11,7 @@ from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD
 
 
 # ====================================================================== figures
-def draw_coverage_maps(coverage: dict, path) -> Path:
+def draw_coverage_maps(coverage: dict, path: Path | str) -> Path:
     """2 x 2 OR maps (optimum, bounded LSQ, DR, RMRC) over yaw x pitch with the OR = 0.8 contour."""
     import matplotlib
 
@@ -34,6 +34,7 @@ def draw_coverage_maps(coverage: dict, path) -> Path:
         ax.set_title(f"{title}: {percent:.1f} % (mean OR {values.mean():.3f})")
         ax.set_xlabel("yaw (deg)")
         ax.set_ylabel("pitch (deg)")
+    assert image is not None  # drawn by each of the four panels
     fig.colorbar(image, ax=axes, shrink=0.8, label="overlap ratio OR")
     fig.suptitle(f"Coverage {n} x {n} (L_dV = 65 mm, roll 0); white: OR = 0.8")
     path = Path(path)
@@ -42,7 +43,7 @@ def draw_coverage_maps(coverage: dict, path) -> Path:
     return path
 
 
-def draw_hold(hold: dict, path) -> Path:
+def draw_hold(hold: dict, path: Path | str) -> Path:
     """Per-start VOI: start, projected gradient (final), self-motion at centring gamma, optimum."""
     import matplotlib
 
@@ -71,7 +72,7 @@ def draw_hold(hold: dict, path) -> Path:
     return path
 
 
-def draw_circle(circle: dict, path) -> Path:
+def draw_circle(circle: dict, path: Path | str) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import brentq
 
 from continuum_gym.baselines import OcclusionLimits, ProjectedGradient
@@ -54,7 +56,8 @@ GAMMA_SCAN = 3600
 
 
 # ---------------------------------------------------------------------- gamma feasibility
-def feasible_gamma_intervals(tip, visibility=VISIBILITY, cone=None, scan=GAMMA_SCAN):
+def feasible_gamma_intervals(tip: ArrayLike, visibility: float = VISIBILITY, cone: LensCone | None = None,
+                             scan: int = GAMMA_SCAN) -> list[tuple[float, float]]:
     """Intervals [lo, hi] (rad, lo in [-pi, pi), hi > lo) of endoscope rotations gamma that see ``tip``
     within ``visibility`` * beta of the view axis (``cone_coordinates(tip, gamma)["angle"]``).
 
@@ -79,7 +82,7 @@ def feasible_gamma_intervals(tip, visibility=VISIBILITY, cone=None, scan=GAMMA_S
     first_bad = int(np.argmin(ok))
     order = (np.arange(n) + first_bad) % n
     step = 2.0 * math.pi / n
-    intervals = []
+    intervals: list[tuple[float, float]] = []
     i = 0
     while i < n:
         if ok[order[i]]:
@@ -151,7 +154,9 @@ def _arc_minimum(robot, tracer, arc, intervals, cone, refine=True):
     return best
 
 
-def hold_optimum(robot, q0, limits, visibility=VISIBILITY, cone=None, step: int = TRACE_STEP, refine: bool = True):
+def hold_optimum(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None,
+                 visibility: float = VISIBILITY, cone: LensCone | None = None, step: float = TRACE_STEP,
+                 refine: bool = True) -> dict[str, Any]:
     """Lowest VOI reachable while holding the tip pose of q0: self-motion arc x feasible gamma.
 
     The arc of the self-motion set that contains q0 within ``limits`` (:func:`trace_self_motion`) is
@@ -195,7 +200,8 @@ def _hold(robot, q0, limits, visibility, cone, step, refine):
     return out, arc
 
 
-def centring_gamma(robot, tips, gamma0=0.0, dt=PAPER_DT, eta2=30.0, gamma_rate=None, cone=None):
+def centring_gamma(robot: MultiBackboneRobot, tips: ArrayLike, gamma0: float = 0.0, dt: float = PAPER_DT,
+                   eta2: float = 30.0, gamma_rate: float | None = None, cone: LensCone | None = None) -> np.ndarray:
     """gamma(t) of the centring law (eq 24: gamma_dot = -eta2 dd_c/dgamma) along tip positions (T, 3).
 
     Explicit Euler from ``gamma0``; ``gamma_rate`` caps |gamma_dot| (rad/s; the env's limit is 3).
@@ -215,7 +221,9 @@ def centring_gamma(robot, tips, gamma0=0.0, dt=PAPER_DT, eta2=30.0, gamma_rate=N
     return out
 
 
-def projected_gradient_hold(robot, starts, limits, steps=HOLD_ITERATIONS, visibility=VISIBILITY, cone=None):
+def projected_gradient_hold(robot: MultiBackboneRobot, starts: ArrayLike, limits: OcclusionLimits | None,
+                            steps: int = HOLD_ITERATIONS, visibility: float = VISIBILITY,
+                            cone: LensCone | None = None) -> dict[str, np.ndarray]:
     """The projected gradient (gamma by its centring law from 0) holding each start's tip pose.
 
     Returns dict of per-start arrays: ``final_voi``, ``final_visible`` (tip within visibility at the end),
@@ -254,8 +262,8 @@ def _hold_job(job):
     return result
 
 
-def hold_study(n_starts: int = HOLD_N_STARTS, seed: int = HOLD_STARTS_SEED, limits=None, visibility=VISIBILITY, workers: int = 2,
-               progress: bool = True):
+def hold_study(n_starts: int = HOLD_N_STARTS, seed: int = HOLD_STARTS_SEED, limits: OcclusionLimits | None = None,
+               visibility: float = VISIBILITY, workers: int = 2, progress: bool = True) -> dict[str, Any]:
     """Hold optimum over ``sample_hold_starts(MultiBackboneRobot(), n_starts, default_rng(seed))``,
     against the projected gradient (``OcclusionLimits()``, 1500 steps, centring gamma from 0)."""
     robot = MultiBackboneRobot()
@@ -298,8 +306,10 @@ def hold_study(n_starts: int = HOLD_N_STARTS, seed: int = HOLD_STARTS_SEED, limi
     }
 
 
-def circle_optimum(robot=None, task: str | None = None, limits=None, visibility=VISIBILITY, cone=None, sample_dt=CIRCLE_SAMPLE_DT,
-                   step: int = TRACE_STEP, progress: bool = False):
+def circle_optimum(robot: MultiBackboneRobot | None = None, task: CircleTask | None = None,
+                   limits: OcclusionLimits | None = None, visibility: float = VISIBILITY, cone: LensCone | None = None,
+                   sample_dt: float = CIRCLE_SAMPLE_DT, step: float = TRACE_STEP,
+                   progress: bool = False) -> dict[str, Any]:
     """Time-connected lower bound of VOI along the circle (task b) within the limits.
 
     From psi_b (``task.start_configuration()``), the orientation held is FK(psi_b)'s. At each sampled time
@@ -330,8 +340,8 @@ def circle_optimum(robot=None, task: str | None = None, limits=None, visibility=
     gamma_law = centring_gamma(robot, fine_p, 0.0, PAPER_DT, gamma_rate=limits.gamma_rate, cone=cone)
     gamma_c = gamma_law[np.round(times / PAPER_DT).astype(int)]
     lower, upper = limit_arrays(limits)
-    chains = {"free": {"q": q_start.copy(), "voi": [], "gamma": []},
-              "centring": {"q": q_start.copy(), "voi": [], "gamma": []}}
+    chains: dict[str, dict[str, Any]] = {"free": {"q": q_start.copy(), "voi": [], "gamma": []},
+                                         "centring": {"q": q_start.copy(), "voi": [], "gamma": []}}
     for k in tqdm(range(n), desc="circle optimum", disable=not progress, leave=False):
         tracer = SelfMotionTracer(robot, p_des[k], R_hold, lower, upper, step, NEWTON_TOLERANCE)
         for name, chain in chains.items():
@@ -378,8 +388,10 @@ def _project_inside(tracer, chain):
     raise RuntimeError("circle_optimum: no point of the previous arc projects within the limits")
 
 
-def env_hold_test_optimum(n_tasks=ENV_HOLD_TASKS, limits=None, visibility=VISIBILITY, workers: int = 2, progress: bool = True,
-                          robot=None, cone=None, split: str = "test"):
+def env_hold_test_optimum(n_tasks: int = ENV_HOLD_TASKS, limits: OcclusionLimits | None = None,
+                          visibility: float = VISIBILITY, workers: int = 2, progress: bool = True,
+                          robot: MultiBackboneRobot | None = None, cone: LensCone | None = None,
+                          split: str = "test") -> dict[str, Any]:
     """Hold optimum on the OcclusionAvoidance environment's held-out hold tasks (ids 0..n-1 of ``split``).
 
     These are the instances ``continuum-gym evaluate`` scores, so ``headroom_closed`` compares each

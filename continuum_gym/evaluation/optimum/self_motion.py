@@ -7,6 +7,7 @@ import math
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.baselines import OcclusionLimits
 from continuum_gym.evaluation.optimum.workers import positive_int
@@ -138,7 +139,7 @@ class SelfMotion(NamedTuple):
     ends: tuple
 
 
-def limit_arrays(limits, n_segments: int = 3) -> tuple[np.ndarray, np.ndarray]:
+def limit_arrays(limits: OcclusionLimits | None, n_segments: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) position limits of an ``OcclusionLimits`` (None: unlimited)."""
     dof = 2 * n_segments + 1
     if limits is None:
@@ -154,7 +155,8 @@ JOINT_NAMES = ("theta1", "delta1", "theta2", "delta2", "theta3", "delta3", "q_in
 class SelfMotionTracer:
     """Predictor-corrector continuation on the self-motion set of the tip pose (p0, R0)."""
 
-    def __init__(self, robot, p0, R0, lower, upper, step: int, tolerance) -> None:
+    def __init__(self, robot: MultiBackboneRobot, p0: ArrayLike, R0: ArrayLike, lower: np.ndarray, upper: np.ndarray,
+                 step: float, tolerance: float) -> None:
         self.robot_args = robot.kernel_args()
         self.p0 = np.ascontiguousarray(p0, dtype=float)
         self.R0 = np.ascontiguousarray(R0, dtype=float)
@@ -164,21 +166,21 @@ class SelfMotionTracer:
         self.scale = np.ones(7)
         self.scale[6] = INSERTION_SCALE
 
-    def inside(self, q):
+    def inside(self, q: np.ndarray) -> bool:
         return bool(np.all(q >= self.lower) and np.all(q <= self.upper))
 
-    def violated(self, q):
+    def violated(self, q: np.ndarray) -> str | None:
         bad = np.where((q < self.lower) | (q > self.upper))[0]
         return JOINT_NAMES[bad[0]] if len(bad) else None
 
-    def project(self, q):
+    def project(self, q: ArrayLike) -> np.ndarray | None:
         """Newton projection of q onto the manifold (copy); None if it does not converge."""
         q = np.array(q, dtype=float)
         it, _, _ = _newton_project(q, self.p0, self.R0, self.robot_args, self.scale, self.tolerance,
                                    NEWTON_MAX_ITERATIONS)
         return q if it >= 0 else None
 
-    def direction(self, q, previous):
+    def direction(self, q: np.ndarray, previous: np.ndarray) -> np.ndarray:
         return _null_direction(np.ascontiguousarray(q), self.robot_args, self.scale, previous)[0]
 
     def _corrected(self, q, t, h):
@@ -187,11 +189,12 @@ class SelfMotionTracer:
                                        NEWTON_MAX_ITERATIONS)
         return qn if it >= 0 and moved < 0.5 * h else None
 
-    def walk(self, q, t, max_steps, origin=None, step: int | None = None):
+    def walk(self, q: np.ndarray, t: np.ndarray, max_steps: int, origin: np.ndarray | None = None,
+             step: float | None = None) -> tuple[list[np.ndarray], str]:
         """Points after q along direction t (scaled space); returns (points, reason)."""
         nominal = self.step if step is None else step
         h = nominal
-        points = []
+        points: list[np.ndarray] = []
         far = False
         for _ in range(max_steps):
             while True:
@@ -229,13 +232,15 @@ class SelfMotionTracer:
                     return points, "loop"
         return points, "max_steps"
 
-    def distance(self, a, b):
+    def distance(self, a: np.ndarray, b: np.ndarray) -> float:
         d = (a - b) / self.scale
         d[[1, 3, 5]] = (d[[1, 3, 5]] + math.pi) % (2.0 * math.pi) - math.pi
         return float(np.linalg.norm(d))
 
 
-def trace_self_motion(robot, q0, limits, step: int = TRACE_STEP, max_steps=20_000, tolerance=NEWTON_TOLERANCE):
+def trace_self_motion(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None,
+                      step: float = TRACE_STEP, max_steps: int = 20_000,
+                      tolerance: float = NEWTON_TOLERANCE) -> SelfMotion:
     """The self-motion arc of the tip pose of q0 by predictor-corrector continuation.
 
     7 joints and a 6-D tip pose leave a one-dimensional set of configurations with the same tip pose.
@@ -284,7 +289,7 @@ def trace_self_motion(robot, q0, limits, step: int = TRACE_STEP, max_steps=20_00
     return SelfMotion(q, len(backward), False, (reason_b, reason_f))
 
 
-def trace_self_motion_from(tracer, q0, max_steps=20_000):
+def trace_self_motion_from(tracer: SelfMotionTracer, q0: np.ndarray, max_steps: int = 20_000) -> SelfMotion:
     """``trace_self_motion`` with an existing tracer (its pose and limits); q0 on the manifold."""
     t0 = tracer.direction(q0, np.full(7, 7 ** -0.5))
     forward, reason_f = tracer.walk(q0.copy(), t0, max_steps, origin=q0)
@@ -294,7 +299,8 @@ def trace_self_motion_from(tracer, q0, max_steps=20_000):
     return SelfMotion(np.array(backward[::-1] + [q0] + forward), len(backward), False, (reason_b, reason_f))
 
 
-def sample_self_motion(robot, q0, limits, samples: int = 1500, step: float = 0.05, seed: int = 0) -> SelfMotion:
+def sample_self_motion(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None, samples: int = 1500,
+                       step: float = 0.05, seed: int = 0) -> SelfMotion:
     """Configurations with the tip pose of q0 within ``limits``, for a robot whose DoF is not 7.
 
     With fewer than 7 joints a 6-D tip pose is (generically) held by isolated configurations: the set

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import differential_evolution, least_squares, minimize
 
 from continuum_gym.baselines import DimensionReduced, ResolvedRate
@@ -76,7 +78,7 @@ def overlap_of_configuration(q, p_a, R_a, robot, tan_half, near, far):
     return overlap_ratio_nb(p_a, R_a, p_cam, R, tan_half, near, far)
 
 
-def view_bounds(robot, delta_span):
+def view_bounds(robot: ContinuumEndoscope, delta_span: float) -> tuple[np.ndarray, np.ndarray]:
     """Joint limits (6,) with the unlimited deltas bounded to [-delta_span, delta_span]."""
     lower, upper = robot.joint_limits
     lower[[3, 5]] = -delta_span
@@ -84,7 +86,7 @@ def view_bounds(robot, delta_span):
     return lower, upper
 
 
-def wrap_view(q, lower, upper):
+def wrap_view(q: ArrayLike, lower: ArrayLike, upper: ArrayLike) -> np.ndarray:
     """Deltas wrapped to [-pi, pi), the rest clipped to the limits (copies)."""
     q = np.array(q, dtype=float)
     q[..., [3, 5]] = q[..., [3, 5]] - 2.0 * math.pi * np.floor((q[..., [3, 5]] + math.pi) / (2.0 * math.pi))
@@ -103,7 +105,8 @@ def _right_jacobian_inverse(e):
     return np.eye(3) + 0.5 * K + coefficient * (K @ K)
 
 
-def fit_pose(p_target, R_target, q0, weight, robot, lower, upper):
+def fit_pose(p_target: np.ndarray, R_target: np.ndarray, q0: ArrayLike, weight: float, robot: ContinuumEndoscope,
+             lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     def residual(q):
         _, R, p_ct, _ = robot.fk_jacobian(q)
         e = rotation_vector(R_target @ R.T)
@@ -120,8 +123,9 @@ def fit_pose(p_target, R_target, q0, weight, robot, lower, upper):
     return wrap_view(result.x, *robot.joint_limits)
 
 
-def bounded_least_squares(target_p, target_R, q0=CASE_STUDY_START, orientation_weight=LSQ_ORIENTATION_WEIGHT,
-                          robot=None):
+def bounded_least_squares(target_p: ArrayLike, target_R: ArrayLike, q0: ArrayLike = CASE_STUDY_START,
+                          orientation_weight: float = LSQ_ORIENTATION_WEIGHT,
+                          robot: ContinuumEndoscope | None = None) -> np.ndarray:
     """Pose fit within the joint limits: the strong view-tracking reference (batched over targets).
 
     Minimises |p_ct(q) - target_p|^2 + (w |log(target_R R_ct(q)^T)|)^2 with scipy ``least_squares``
@@ -222,8 +226,10 @@ def _optimise_view_point(job):
             "starts": {name: (q, -objective(wrap_view(q, lower, upper))) for name, q in job["starts"].items()}}
 
 
-def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, effort="standard", seed: int = OPTIMUM_SEED,
-                          workers: int = 1, progress: bool = False, baselines=True):
+def view_tracking_optimum(q_davinci: ArrayLike, robot: ContinuumEndoscope | None = None,
+                          davinci: DaVinciEndoscope | None = None, frustum: Frustum | None = None,
+                          effort: str = "standard", seed: int = OPTIMUM_SEED, workers: int = 1, progress: bool = False,
+                          baselines: bool = True) -> dict[str, Any]:
     """The largest overlap ratio reachable within the joint limits, for each da Vinci view.
 
     For each target view (the da Vinci camera frame of ``q_davinci``), maximises OR(F_dV, F_ct(q)) over
@@ -265,13 +271,13 @@ def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, eff
     n = grid.shape[0]
     p_a, R_a = davinci.forward_kinematics(grid)
     p_t, R_t = davinci.target_pose(grid)
-    starts = {}
+    starts: dict[str, np.ndarray] = {}
     if baselines:
         start = np.broadcast_to(CASE_STUDY_START, (n, 6))
         starts["dimension_reduced"] = DimensionReduced(robot=robot).solve(start, (p_t, R_t))["q"]
         starts["resolved_rate"] = ResolvedRate(robot=robot).solve(start, (p_t, R_t))["q"]
     lower, upper = view_bounds(robot, math.pi)
-    jobs = []
+    jobs: list[dict[str, Any]] = []
     for k in range(n):
         jobs.append({"index": k, "robot": robot.kernel_args(), "endoscope": robot, "p_a": np.ascontiguousarray(p_a[k]),
                      "R_a": np.ascontiguousarray(R_a[k]), "frustum": (frustum.tan_half, frustum.near, frustum.far),
@@ -281,7 +287,7 @@ def view_tracking_optimum(q_davinci, robot=None, davinci=None, frustum=None, eff
     q = np.array([r["q"] for r in results])
     p_c, R_c = robot.forward_kinematics(q)
     overlap = overlap_ratio(p_a, R_a, p_c, R_c, frustum)
-    references = {}
+    references: dict[str, dict[str, np.ndarray]] = {}
     for name in results[0]["starts"]:
         q_ref = np.array([r["starts"][name][0] for r in results])
         p_r, R_r = robot.forward_kinematics(q_ref)
@@ -310,8 +316,10 @@ def _view_job_with_lsq(job):
     return _optimise_view_point(job)
 
 
-def coverage_optimum(grid: int = COVERAGE_GRID, workers: int = 2, progress: bool = True, global_check=GLOBAL_CHECK_SAMPLE,
-                     seed: int = OPTIMUM_SEED, robot=None, davinci=None, effort="standard"):
+def coverage_optimum(grid: int = COVERAGE_GRID, workers: int = 2, progress: bool = True,
+                     global_check: int = GLOBAL_CHECK_SAMPLE, seed: int = OPTIMUM_SEED,
+                     robot: ContinuumEndoscope | None = None, davinci: DaVinciEndoscope | None = None,
+                     effort: str = "standard") -> dict[str, Any]:
     """Coverage of the paper's map (L_dV = 65 mm, roll 0, yaw/pitch in [-60, 60] deg, OR > 0.8).
 
     Returns a dict with the cache keys of ``coverage`` (percentages, mean OR, per-point OR maps of the

@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.validation import fraction, integer
+
+Job = TypeVar("Job")
+Result = TypeVar("Result")
 
 # ====================================================================== BLAS threads
 _BLAS_CONTROLS: dict = {}
@@ -43,7 +49,7 @@ def _blas_controls():
 
 
 @contextmanager
-def single_threaded_blas():
+def single_threaded_blas() -> Iterator[None]:
     """Run the block with one OpenBLAS thread (restored afterwards).
 
     The searches make hundreds of thousands of tiny BLAS calls (L-BFGS-B, SVDs of 6x7 matrices); a
@@ -62,11 +68,12 @@ def single_threaded_blas():
             setter(count)
 
 
-def map_jobs(function, jobs, workers: int, progress: bool, description):
+def map_jobs(function: Callable[[Job], Result], jobs: Sequence[Job], workers: int, progress: bool,
+             description: str) -> list[Result]:
     """Run ``function`` over ``jobs`` (in order), in ``workers`` processes, with a tqdm bar."""
     from tqdm.auto import tqdm
 
-    results = [None] * len(jobs)
+    results: list[Any] = [None] * len(jobs)
     bar = tqdm(total=len(jobs), desc=description, disable=not progress, leave=False)
     if workers <= 1 or len(jobs) <= 1:
         with single_threaded_blas():
@@ -90,7 +97,7 @@ def _single_threaded(function, job):
         return function(job)
 
 
-def positive_int(value, name: str) -> int:
+def positive_int(value: object, name: str) -> int:
     """An integer >= 1 (``ValueError`` naming ``name`` otherwise)."""
     return integer(value, name, low=1)
 
@@ -100,10 +107,10 @@ def grid_size(grid: int) -> int:
     return integer(grid, "grid (points per axis)", low=2)
 
 
-def visibility_fraction(visibility) -> float:
+def visibility_fraction(visibility: float) -> float:
     """The visibility requirement: a fraction of the cone half-angle in (0, 1]."""
     return fraction(visibility, "visibility (fraction of the cone half-angle)")
 
 
-def rounded(values, digits=6):
+def rounded(values: ArrayLike, digits: int = 6) -> list:
     return np.round(np.asarray(values, dtype=float), digits).tolist()
