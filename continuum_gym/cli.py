@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from collections.abc import Sequence
 
 IMPORT_FLAG = "--import"
 IMPORT_HELP = ("import MODULE first (repeatable): a module that registers your own env ids, robots, tasks, "
@@ -65,7 +66,7 @@ def load_plugins(modules: list[str]) -> None:
     plugins.load_known()  # CONTINUUM_GYM_PLUGINS and the installed entry points
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = argparse.ArgumentParser(prog="continuum-gym", description=__doc__.splitlines()[0])
     parser.add_argument(IMPORT_FLAG, action="append", default=[], metavar="MODULE", help=IMPORT_HELP)

@@ -15,12 +15,17 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from continuum_gym.evaluation.io import write_bytes_atomic, write_text_atomic
 from continuum_gym.validation import describe
+
+if TYPE_CHECKING:
+    import gymnasium
+
+    from continuum_gym.envs.config import EnvConfig
 
 #: Version of the file layout (bumped when a key changes meaning).
 FORMAT = 1
@@ -45,7 +50,7 @@ def tasks_path(path: Path) -> Path:
 
 
 def _save_tasks(trajectories: list, path: Path) -> None:
-    arrays: dict[str, np.ndarray] = {"count": np.array(len(trajectories))}
+    arrays: dict[str, Any] = {"count": np.array(len(trajectories))}  # Any: np.savez's **kwds (not its keywords)
     for k, trajectory in enumerate(trajectories):
         names = _TIP_FIELDS if hasattr(trajectory, "positions") else _DAVINCI_FIELDS
         for name in names:
@@ -94,7 +99,7 @@ def save_config(env: Any, path: str | Path) -> Path:
     return path
 
 
-def load_config(path: str | Path):
+def load_config(path: str | Path) -> tuple[str, EnvConfig, int | None]:
     """``(env_id, EnvConfig, max_episode_steps)`` from a file written by ``save_config``.
 
     ``max_episode_steps`` is the Gymnasium time limit the saved env was made with (None: the task's own).
@@ -121,7 +126,7 @@ def load_config(path: str | Path):
     return env_id, get_spec(data["base_env_id"]).config_class.from_dict(config), data.get("max_episode_steps")
 
 
-def make_from_config(path: str | Path, **kwargs: Any):
+def make_from_config(path: str | Path, **kwargs: Any) -> gymnasium.Env:
     """``gym.make`` of the env saved at ``path``; ``kwargs`` go to ``gym.make`` (e.g. ``render_mode``)."""
     import gymnasium as gym
 

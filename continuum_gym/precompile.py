@@ -17,6 +17,7 @@ import shutil
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from continuum_gym.robots.compiled import MANIFEST
@@ -62,7 +63,7 @@ def status(directory: Path) -> tuple[bool, str]:
                   f"'{manifest['cpu']}', built in {manifest['seconds']:.0f} s")
 
 
-def warm_up(env_id: str, report=lambda message: None) -> None:
+def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -> None:
     """Build and step every configuration of ``env_id`` whose kernels a user, the main job or the tests compile.
 
     ``report`` hears ``total <n>`` first, then ``done`` after each of the n steps; a worker prints them
@@ -77,8 +78,10 @@ def warm_up(env_id: str, report=lambda message: None) -> None:
 
     spec = get_spec(env_id)
     config = spec.config_class
-    work = [{"task": task, "task_split": "test" if task in config.test_only_tasks else "train", "base_controller": base}
-            for base in (*spec.baselines, None) for task in config.builtin_tasks]
+    # test_only_tasks, builtin_tasks: ClassVars of each concrete config class, not declared on EnvConfig
+    test_only, builtin = config.test_only_tasks, config.builtin_tasks  # type: ignore[attr-defined]
+    work = [{"task": task, "task_split": "test" if task in test_only else "train", "base_controller": base}
+            for base in (*spec.baselines, None) for task in builtin]
     report(f"total {len(work) + 3}")  # the single envs, two vector envs, the library
     for kwargs in work:
         _step_twice(gym.make(env_id, **kwargs))

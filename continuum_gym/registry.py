@@ -36,8 +36,8 @@ that module (``continuum_gym.plugins``). Anything registered at import of such a
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable, Collection, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -60,6 +60,10 @@ from continuum_gym.envs.registered import (
     robot_names,
 )
 from continuum_gym.validation import closest, describe, number
+
+if TYPE_CHECKING:
+    from continuum_gym.robots import ContinuumEndoscope, MultiBackboneRobot
+
 _NAME_HINT = "a non-empty string of letters, digits, '_' or '-'"
 
 
@@ -69,7 +73,7 @@ def _env(env: str) -> str:
     return get_spec(env).env_id
 
 
-def _name(name: Any, taken: Sequence[str], what: str, replace: bool) -> str:
+def _name(name: Any, taken: Collection[str], what: str, replace: bool) -> str:
     if not isinstance(name, str) or not name or not all(c.isalnum() or c in "_-" for c in name):
         raise ValueError(f"name must be {_NAME_HINT}; got {describe(name)}")
     if name in taken and not replace:
@@ -77,7 +81,7 @@ def _name(name: Any, taken: Sequence[str], what: str, replace: bool) -> str:
     return name
 
 
-def register_robot(name: str, robot, *, replace: bool = False) -> None:
+def register_robot(name: str, robot: MultiBackboneRobot | ContinuumEndoscope, *, replace: bool = False) -> None:
     """Make ``robot`` available as ``gym.make(id, robot=name)``.
 
     A ``MultiBackboneRobot`` serves OcclusionAvoidance, a ``ContinuumEndoscope`` ViewTracking.
@@ -110,7 +114,7 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
     from continuum_gym.envs.trajectories import DaVinciTrajectory, TipTrajectory
 
     env = _env(env)
-    if name in get_spec(env).config_class.builtin_tasks:
+    if name in get_spec(env).config_class.builtin_tasks:  # type: ignore[attr-defined]  # ClassVar of each config
         raise ValueError(f"name {name!r} is a built-in task of {env}; pick another name")
     if not callable(sampler):
         raise ValueError(f"sampler must be callable as sampler(task_id, split, rng); got {describe(sampler)}")
@@ -123,8 +127,8 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
     record("task", env, name, plugins.caller_origin())
 
 
-def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Sequence[float] = (), doc: str = "",
-                        replace: bool = False) -> CustomController:
+def register_controller(name: str, rates: Callable[..., None], *, env: str = OCCLUSION, params: Sequence[float] = (),
+                        doc: str = "", replace: bool = False) -> CustomController:
     """A compiled rate function as the residual base: ``gym.make(env, base_controller=name)``.
 
     The function is compiled for the documented signature here (``ValueError`` if it does not fit) and
@@ -137,18 +141,18 @@ def register_controller(name: str, rates, *, env: str = OCCLUSION, params: Seque
     if name in get_spec(env).baselines:
         raise ValueError(f"name {name!r} is a built-in baseline of {env}; pick another name")
     name = _name(name, CONTROLLERS[env], "registered controller", replace)
-    params = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
-    if not np.all(np.isfinite(params)):
-        raise ValueError(f"params must be finite numbers; got {describe(params)}")
-    controller = CustomController(name, env, rates, params, doc)
+    values = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"params must be finite numbers; got {describe(values)}")
+    controller = CustomController(name, env, rates, values, doc)
     check_controller(controller)
     CONTROLLERS[env][name] = controller
     record("controller", env, name, plugins.caller_origin())
     return controller
 
 
-def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float = 1.0, compiled: bool = True,
-                         params: Sequence[float] = (), replace: bool = False) -> RewardTerm:
+def register_reward_term(name: str, fn: Callable[..., Any], *, env: str = OCCLUSION, weight: float = 1.0,
+                         compiled: bool = True, params: Sequence[float] = (), replace: bool = False) -> RewardTerm:
     """A named reward term, added (times ``weight``) to the reward of every env of ``env`` made afterwards.
 
     ``compiled=True``: ``fn(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,), params (m,))
@@ -162,14 +166,14 @@ def register_reward_term(name: str, fn, *, env: str = OCCLUSION, weight: float =
     from continuum_gym.envs.spec import get_spec
 
     env = _env(env)
-    builtin = get_spec(env).config_class.default_weights
+    builtin = get_spec(env).config_class.default_weights  # type: ignore[attr-defined]  # ClassVar of each config
     if name in builtin:
         raise ValueError(f"name {name!r} is a built-in reward term of {env}; pick another name")
     name = _name(name, REWARD_TERMS[env], "registered reward term", replace)
     weight = number(weight, "weight", low=0.0, high=1e6)
-    params = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
-    call = check_reward_term(RewardTerm(name, env, fn, weight, bool(compiled), params))
-    term = RewardTerm(name, env, fn, weight, bool(compiled), params, call=call,
+    values = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
+    call = check_reward_term(RewardTerm(name, env, fn, weight, bool(compiled), values))
+    term = RewardTerm(name, env, fn, weight, bool(compiled), values, call=call,
                       with_rates=bool(compiled) or takes_rates(fn, 2))
     REWARD_TERMS[env][name] = term
     record("reward term", env, name, plugins.caller_origin())
