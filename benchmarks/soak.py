@@ -6,6 +6,10 @@ entries are checked finite and the observations inside the observation space. Th
 on the first violation and reports the configuration and row.
 
     python benchmarks/soak.py --steps 1e7 --json results/bench/soak.json
+    python benchmarks/soak.py --steps 1e6 --model-error mild severe  # per preset (issue 37)
+
+With ``--model-error`` every configuration runs under each preset given (every other one with
+``randomize_model_error=True``), ``--steps`` robot-steps per environment and preset.
 """
 
 from __future__ import annotations
@@ -70,11 +74,15 @@ def main(argv=None) -> int:
     parser.add_argument("--env", nargs="+", default=list(CONFIGS))
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", default=None)
+    parser.add_argument("--model-error", nargs="+", default=None, choices=("none", "mild", "severe"),
+                        help="run every configuration under these model-error presets (--steps per preset)")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     results = {"machine": machine(), "steps_per_env": int(args.steps)}
-    for env_id in args.env:
-        configs = CONFIGS[env_id]
+    for env_id, preset in itertools.product(args.env, args.model_error or [None]):
+        configs = CONFIGS[env_id] if preset is None else [
+            dict(config, model_error=preset, randomize_model_error=preset != "none" and k % 2 == 1)
+            for k, config in enumerate(CONFIGS[env_id])]
         per_config = int(args.steps) // len(configs)
         started = time.perf_counter()
         total = {"robot_steps": 0, "episodes": 0, "configurations": len(configs), "non_finite": 0}
@@ -83,9 +91,10 @@ def main(argv=None) -> int:
             total["robot_steps"] += out["robot_steps"]
             total["episodes"] += out["episodes"]
         total["seconds"] = round(time.perf_counter() - started, 1)
-        print(f"{env_id}: {total['robot_steps']:,} robot-steps, {total['episodes']:,} episodes over "
+        label = env_id if preset is None else f"{env_id} model_error={preset}"
+        print(f"{label}: {total['robot_steps']:,} robot-steps, {total['episodes']:,} episodes over "
               f"{len(configs)} configurations, 0 non-finite, {total['seconds']} s", flush=True)
-        results[env_id] = total
+        results[env_id if preset is None else f"{env_id} {preset}"] = total
     results["peak_rss_mib"] = round(peak_rss_mib(), 1)
     return finish(results, args.json)
 

@@ -300,6 +300,11 @@ class BatchedCore(abc.ABC):
         self._mismatch_args = (self._mismatch.arrays,)
         self.info_fields = with_model_error_info(type(self).info_fields)
 
+    def measured_joints(self, row: int) -> np.ndarray:
+        """A copy of a row's joints as its sensors read them (the true ones without a model error)."""
+        source = self.q if self._mismatch is None else self._mismatch.arrays.q_meas
+        return source[row].copy()
+
     def _reset_mismatch(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
         if self._mismatch is not None:
             self._mismatch.reset(rows, task_ids, self.q[rows])

@@ -187,7 +187,7 @@ class OcclusionCore(BatchedCore):
         """The dict observation an analytic controller's ``predict`` reads, for one row."""
         t = self.steps[row] * self.control_dt
         p, v = self.desired(row, t)
-        return {"q": self.q[row].copy(), "gamma": float(self.gamma[row]), "p_des": p, "R_des": self.desired_rotation(row, t),
+        return {"q": self.measured_joints(row), "gamma": float(self.gamma[row]), "p_des": p, "R_des": self.desired_rotation(row, t),
                 "v_des": v, "dt": self.control_dt / self.substeps, "robot": self.robot, "cone": self.cone}
 
 

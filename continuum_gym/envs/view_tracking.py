@@ -165,7 +165,7 @@ class ViewTrackingCore(BatchedCore):
 
     def controller_observation(self, row: int = 0) -> dict:
         p, R = self.davinci.target_pose(self.davinci_configuration(row))
-        return {"q": self.q[row].copy(), "p_target": p, "R_target": R, "dt": self.control_dt, "robot": self.robot}
+        return {"q": self.measured_joints(row), "p_target": p, "R_target": R, "dt": self.control_dt, "robot": self.robot}
 
 
 _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a moving da Vinci 30-degree view.
