@@ -20,7 +20,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from continuum_gym.robots.compiled import MANIFEST
+# The name robots.compiled reads the manifest by (it is not imported here: `precompile --help` stays light).
+MANIFEST = "manifest.json"
 
 _WORKER_FLAG = "--worker"
 #: Starts a worker's progress lines on its stdout; its other stdout lines are passed on as they are.
@@ -55,7 +56,8 @@ def status(directory: Path) -> tuple[bool, str]:
 
     manifest = read_manifest(directory)
     if manifest is None:
-        return False, f"no precompiled set in {directory}: kernels compile on first use (run `continuum-gym precompile`)"
+        return False, (f"no precompiled set in {directory}: kernels compile on first use "
+                       "(run `continuum-gym precompile`)")
     if manifest.get("digest") != source_digest():
         return False, (f"the precompiled set in {directory} was built from other sources or another compiler stack: "
                        "it is ignored (rerun `continuum-gym precompile`)")

@@ -44,17 +44,17 @@ import numpy as np
 from continuum_gym import plugins
 from continuum_gym.envs.ids import OCCLUSION, VIEW
 from continuum_gym.envs.registered import (
-    TABLES,
     CONTROLLERS,
     ORIGINS,
     REWARD_TERMS,
     ROBOTS,
+    TABLES,
     TASKS,
     CustomController,
     RewardTerm,
-    record,
     controller_names,
     origin_of,
+    record,
     reference_of,
     resolve,
     robot_names,

@@ -132,6 +132,7 @@ def test_digest_follows_the_code_of_every_source_file_not_its_docstrings_or_comm
 
 
 def test_a_manifests_hashes_are_reused_only_for_unchanged_bytes(tmp_path, monkeypatch):
+    assert precompile.MANIFEST == compiled.MANIFEST  # the file precompile writes is the one the kernels read
     (tmp_path / "a.py").write_text("x = 1\n")
     monkeypatch.setattr(compiled, "PACKAGE_ROOT", tmp_path)
     hashes = compiled.source_hashes()
