@@ -103,6 +103,9 @@ CASES = [
     (VIEW, {"base_controller": "resolved_rate"}),
     (VIEW, {"residual_space": "target", "observe_target": True}),
     (VIEW, {"base_controller": None}),
+    # the model-error steps (issue 37): their own kernels, a registered controller's slot included
+    (OCCLUSION, {"base_controller": "allocating_tracker", "model_error": "severe"}),
+    (VIEW, {"residual_space": "target", "model_error": "severe", "randomize_model_error": True}),
 ]
 
 
