@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def broadcast_rows(shape: tuple, *arrays_and_tails):
+def broadcast_rows(shape: tuple[int, ...], *arrays_and_tails: tuple[ArrayLike, tuple[int, ...]]
+                   ) -> tuple[np.ndarray, ...]:
     """Broadcast each (array, tail) to ``shape + tail`` and flatten the batch: C-contiguous (-1, *tail) rows."""
     return tuple(np.ascontiguousarray(np.broadcast_to(x, shape + tail).reshape((-1,) + tail))
                  for x, tail in arrays_and_tails)
 
 
-def as_rotation_field(value) -> np.ndarray:
+def as_rotation_field(value: ArrayLike) -> np.ndarray:
     """A rotation from an observation dict: (..., 3, 3) or flattened (..., 9)."""
     R = np.asarray(value, dtype=float)
     return R.reshape(R.shape[:-1] + (3, 3)) if R.shape[-1] == 9 else R
@@ -26,16 +31,23 @@ class Controller:
     """
 
     name = "controller"
-    action_dim = 0
 
-    def joint_rates(self, q, target, *args, **kwargs):  # pragma: no cover - abstract
+    @property
+    def action_dim(self) -> int:
+        """Length of the command (a subclass overrides it)."""
+        return 0
+
+    def joint_rates(self, q: ArrayLike, target: Any, *args: Any, **kwargs: Any
+                    ) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=False):  # pragma: no cover
+    def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:  # pragma: no cover
         raise NotImplementedError
 
     @staticmethod
-    def _observation_dict(observation, required):
+    def _observation_dict(observation: object, required: Sequence[str]) -> dict[str, Any]:
         if not isinstance(observation, dict):
             raise ValueError(
                 "analytic controllers read a dict observation with keys "
@@ -45,5 +57,5 @@ class Controller:
             raise ValueError(f"observation lacks keys {missing}; required: {list(required)}")
         return observation
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"{type(self).__name__}()"

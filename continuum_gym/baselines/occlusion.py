@@ -23,9 +23,12 @@ an insertion range, joint-rate limits and a gamma-rate limit. They are respected
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.baselines.base import Controller, as_rotation_field, broadcast_rows
 from continuum_gym.baselines.occlusion_kernels import (
@@ -35,8 +38,8 @@ from continuum_gym.baselines.occlusion_kernels import (
     twist_rates_batch,
     wrap_angle,
 )
-from continuum_gym.geometry.force_field import resolve_field
-from continuum_gym.geometry.lens_cone import resolve_cone
+from continuum_gym.geometry.force_field import ForceField, resolve_field
+from continuum_gym.geometry.lens_cone import LensCone, resolve_cone
 from continuum_gym.robots.mbcr import MultiBackboneRobot, default_psps
 from continuum_gym.validation import as_finite, interval, non_negative, number, positive
 
@@ -45,6 +48,10 @@ HALF_PI = 0.5 * math.pi
 MAX_INSERTION = 0.2  # m
 MAX_ANGULAR_RATE = 100.0  # rad/s
 MAX_INSERTION_RATE = 1.0  # m/s
+
+#: What the controllers track: ``(p_des (..., 3) m, R_des (..., 3, 3)[, v_des (..., 3) m/s or None])`` or a
+#: dict with those keys.
+OcclusionTarget: TypeAlias = Sequence[ArrayLike | None] | Mapping[str, ArrayLike | None]
 
 __all__ = ["OcclusionLimits", "OcclusionController", "MinimumNorm", "ProjectedGradient", "wrap_angle"]
 
@@ -137,7 +144,8 @@ class OcclusionController(Controller):
     name = "occlusion"
     use_gradient = False
 
-    def __init__(self, robot: MultiBackboneRobot | None = None, cone=None, field=None, psps=None, eta1: float = 30.0,
+    def __init__(self, robot: MultiBackboneRobot | None = None, cone: LensCone | None = None,
+                 field: ForceField | None = None, psps: Sequence[tuple[int, float]] | None = None, eta1: float = 30.0,
                  eta2: float = 30.0, epsilon: float = 1e-6, k_track: float = 100.0, v_max: float = 0.05,
                  w_max: float = 1.0, rotate_endoscope: bool = True, limits: OcclusionLimits | None = None) -> None:
         self.robot = robot if robot is not None else MultiBackboneRobot()
@@ -195,7 +203,8 @@ class OcclusionController(Controller):
         return (*broadcast_rows(shape, (q, (dof,)), (gamma, ()), (p_des, (3,)), (R_des, (3, 3)), (v_des, (3,))),
                 shape)
 
-    def joint_rates(self, q, target, gamma=0.0, dt: float = 1e-3) -> np.ndarray:
+    def joint_rates(self, q: ArrayLike, target: OcclusionTarget, gamma: ArrayLike = 0.0, dt: float = 1e-3
+                    ) -> np.ndarray:
         """Commanded rates [q_dot (dof), gamma_dot] of shape (..., dof + 1) (rad/s; m/s for q_ins).
 
         Args:
@@ -208,7 +217,8 @@ class OcclusionController(Controller):
         rates, _ = self.joint_rates_with_info(q, target, gamma, dt)
         return rates
 
-    def joint_rates_with_info(self, q, target, gamma=0.0, dt: float = 1e-3) -> tuple[np.ndarray, dict]:
+    def joint_rates_with_info(self, q: ArrayLike, target: OcclusionTarget, gamma: ArrayLike = 0.0, dt: float = 1e-3
+                              ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """As ``joint_rates``, plus info: ``frozen`` (..., dof) bool, ``rate_scale`` (...)."""
         Q, G, P, R, V, shape = self._inputs(q, gamma, target)
         dt = positive(dt, "dt", "s")
@@ -223,7 +233,8 @@ class OcclusionController(Controller):
         frozen_mask = ((frozen[:, None] >> np.arange(dof)) & 1).astype(bool).reshape(shape + (dof,))
         return rates, {"frozen": frozen_mask, "rate_scale": scale.reshape(shape)}
 
-    def rates_for_twist(self, q, xi_dot, gamma=0.0, dt: float = 1e-3) -> np.ndarray:
+    def rates_for_twist(self, q: ArrayLike, xi_dot: ArrayLike, gamma: ArrayLike = 0.0, dt: float = 1e-3
+                        ) -> np.ndarray:
         """Rates [q_dot (dof), gamma_dot] (..., dof + 1) for a desired tip twist xi_dot = [v; w] (..., 6) in
         m/s and rad/s, eq (22)."""
         dof = self.robot.dof
@@ -240,7 +251,8 @@ class OcclusionController(Controller):
         twist_rates_batch(Q, G, XI, positive(dt, "dt", "s"), self.robot.kernel_args(), self.params, qdot, gamma_dot)
         return np.concatenate([qdot, gamma_dot[:, None]], axis=1).reshape(shape + (dof + 1,))
 
-    def rollout(self, q0, gamma0, p_des, R_des, v_des=None, dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    def rollout(self, q0: ArrayLike, gamma0: ArrayLike, p_des: ArrayLike, R_des: ArrayLike,
+                v_des: ArrayLike | None = None, dt: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
         """Closed-loop explicit-Euler run (paper-notes §1.3 item 6) from q0 over per-step targets.
 
         Args:
@@ -274,7 +286,9 @@ class OcclusionController(Controller):
             return q_traj[0], gamma_traj[0]
         return q_traj, gamma_traj
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
+    def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """SB3 ``predict``: observation dict with ``q``, ``gamma``, ``p_des``, ``R_des`` (and ``v_des``).
 
         Returns (rates (..., dof + 1), None): the same command as ``joint_rates``.

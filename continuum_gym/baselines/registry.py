@@ -6,6 +6,9 @@ Which controllers an environment offers as residual base is part of its spec
 
 from __future__ import annotations
 
+from typing import Any, Literal, overload
+
+from continuum_gym.baselines.base import Controller
 from continuum_gym.baselines.occlusion import (
     MinimumNorm,
     OcclusionController,
@@ -24,7 +27,17 @@ OCCLUSION_CONTROLLERS = tuple(name for name, cls in CONTROLLERS.items() if issub
 VIEW_TRACKING_CONTROLLERS = tuple(name for name, cls in CONTROLLERS.items() if issubclass(cls, ViewTrackingController))
 
 
-def make_controller(name: str, **kwargs):
+@overload
+def make_controller(name: Literal["minimum_norm"], **kwargs: Any) -> MinimumNorm: ...
+@overload
+def make_controller(name: Literal["projected_gradient"], **kwargs: Any) -> ProjectedGradient: ...
+@overload
+def make_controller(name: Literal["resolved_rate"], **kwargs: Any) -> ResolvedRate: ...
+@overload
+def make_controller(name: Literal["dimension_reduced"], **kwargs: Any) -> DimensionReduced: ...
+@overload
+def make_controller(name: str, **kwargs: Any) -> Controller: ...
+def make_controller(name: str, **kwargs: Any) -> Controller:
     """Build a registered analytic controller by name; unknown names list the valid ones."""
     try:
         cls = CONTROLLERS[name]

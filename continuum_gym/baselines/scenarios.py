@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.lens_cone import lens_origin, view_axis
 from continuum_gym.geometry.occlusion import occlusion_details
@@ -34,7 +35,8 @@ class CircleTask:
     distance: float = 0.065
     period: float = 10.0
 
-    def frame(self, alpha=math.radians(30.0), d_o=4.47e-3):
+    def frame(self, alpha: float = math.radians(30.0), d_o: float = 4.47e-3
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(centre, n_hat, x_hat, y_hat) of the circle plane in {w}."""
         normal = np.array([-math.sin(alpha), 0.0, math.cos(alpha)])
         centre = np.array([0.0, d_o, 0.0]) + self.distance * normal
@@ -42,7 +44,8 @@ class CircleTask:
         y_hat = np.array([0.0, 1.0, 0.0])
         return centre, normal, x_hat, y_hat
 
-    def trajectory(self, t, alpha=math.radians(30.0), d_o=4.47e-3):
+    def trajectory(self, t: ArrayLike, alpha: float = math.radians(30.0), d_o: float = 4.47e-3
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """Desired positions (..., 3) in m and feed-forward velocities (..., 3) in m/s at times t (s)."""
         t = np.asarray(t, dtype=float)[..., None]
         centre, _, x_hat, y_hat = self.frame(alpha, d_o)
@@ -57,9 +60,9 @@ class CircleTask:
         return MultiBackboneRobot.psi_b.copy()
 
 
-def sample_hold_starts(robot: MultiBackboneRobot, n: int, rng: np.random.Generator, voi_target=0.25,
-                       voi_tolerance=0.01, min_psps_inside=0.6, max_bend=1.2, max_insertion=0.02,
-                       batch=4096, max_draws=2_000_000):
+def sample_hold_starts(robot: MultiBackboneRobot, n: int, rng: np.random.Generator, voi_target: float = 0.25,
+                       voi_tolerance: float = 0.01, min_psps_inside: float = 0.6, max_bend: float = 1.2,
+                       max_insertion: float = 0.02, batch: int = 4096, max_draws: int = 2_000_000) -> np.ndarray:
     """Paper-like hold starts (paper-notes §1.5 search): random bends, VOI in target ± tolerance at gamma = 0.
 
     Draws theta_i = pi/2 - U(0.05, max_bend), delta_i ~ U(-pi, pi), q_ins ~ U(0, max_insertion) (m),
@@ -68,7 +71,7 @@ def sample_hold_starts(robot: MultiBackboneRobot, n: int, rng: np.random.Generat
 
     Returns (n, 7) configurations.
     """
-    accepted = []
+    accepted: list[np.ndarray] = []
     drawn = 0
     while sum(len(a) for a in accepted) < n:
         if drawn >= max_draws:
@@ -89,7 +92,7 @@ def sample_hold_starts(robot: MultiBackboneRobot, n: int, rng: np.random.Generat
     return np.concatenate(accepted)[:n]
 
 
-def _inside_cone_fraction(robot, q):
+def _inside_cone_fraction(robot: MultiBackboneRobot, q: np.ndarray) -> dict[str, np.ndarray]:
     from continuum_gym.geometry.lens_cone import cone_coordinates
 
     tip, _ = robot.forward_kinematics(q)

@@ -20,8 +20,11 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Mapping, Sequence
+from typing import TypeAlias
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.baselines.base import Controller, as_rotation_field, broadcast_rows
 from continuum_gym.robots.compiled import kernel
@@ -44,6 +47,10 @@ CONVERGED_POSITION_MM = 1e-3
 CONVERGED_ORIENTATION = 1e-5
 STALL_MOTION = 1e-9
 STALL_STEPS = 50
+
+#: What the controllers track: the da Vinci target frame ``(p_target (..., 3) m, R_target (..., 3, 3))`` or a
+#: dict with those keys.
+ViewTarget: TypeAlias = Sequence[ArrayLike] | Mapping[str, ArrayLike]
 
 #: What the IK kernels read besides the robot: RMRC or DR, the twist caps (m/s, rad/s), the damping of
 #: eq (19) in mm units and the joint limits (6,).
@@ -225,7 +232,9 @@ def integrate_view_step(q, qdot, dt, lower, upper, out):
 
 @kernel
 def _solve_batch(Q0, P_tgt, R_tgt, dt, max_steps, robot, prm, record, q_final, steps, status, q_hist):
-    """Run each row to convergence, stall or max_steps (paper-notes §2.6). status: 0 max steps, 1 converged, 2 stalled."""
+    """Run each row to convergence, stall or max_steps (paper-notes §2.6).
+
+    status: 0 max steps, 1 converged, 2 stalled."""
     scratch = make_view_scratch()
     q_new = scratch.q_new
     qdot = np.empty(6)
@@ -276,7 +285,8 @@ class ViewTrackingController(Controller):
     method = DR
     action_dim = DOF
 
-    def __init__(self, robot=None, v_lim=0.1, w_lim=math.pi / 2, damping=0.01, lower=None, upper=None) -> None:
+    def __init__(self, robot: ContinuumEndoscope | None = None, v_lim: float = 0.1, w_lim: float = math.pi / 2,
+                 damping: float = 0.01, lower: ArrayLike | None = None, upper: ArrayLike | None = None) -> None:
         self.robot = robot if robot is not None else ContinuumEndoscope()
         if not isinstance(self.robot, ContinuumEndoscope):
             raise ValueError(f"robot must be a ContinuumEndoscope; got {type(self.robot).__name__}")
@@ -307,11 +317,12 @@ class ViewTrackingController(Controller):
             raise ValueError(f"q and target batch shapes do not broadcast: {error}") from error
         return (*broadcast_rows(shape, (q, (DOF,)), (p, (3,)), (R, (3, 3))), shape)
 
-    def joint_rates(self, q, target, dt=0.01):
+    def joint_rates(self, q: ArrayLike, target: ViewTarget, dt: float = 0.01) -> np.ndarray:
         """Rates (..., 6) in SI (m/s for L0, rad/s) toward the target frame; dt (s) sets the capped twist."""
         return self.joint_rates_with_info(q, target, dt)[0]
 
-    def joint_rates_with_info(self, q, target, dt=0.01):
+    def joint_rates_with_info(self, q: ArrayLike, target: ViewTarget, dt: float = 0.01
+                              ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """As ``joint_rates`` plus info: ``position_error_m``, ``orientation_error_rad``, ``frozen`` (..., 6)."""
         Q, P, R, shape = self._inputs(q, target)
         dt = positive(dt, "dt", "s")
@@ -327,7 +338,8 @@ class ViewTrackingController(Controller):
         }
         return rates.reshape(shape + (DOF,)), info
 
-    def solve(self, q0, target, dt=0.01, max_steps=1000, record=False):
+    def solve(self, q0: ArrayLike, target: ViewTarget, dt: float = 0.01, max_steps: int = 1000, record: bool = False
+              ) -> dict[str, np.ndarray]:
         """Iterate to convergence, stall or ``max_steps`` (paper-notes §2.6), each row independently.
 
         Returns a dict: ``q`` (..., 6) final configurations, ``steps`` (...), ``status`` (...: 0 ran out
@@ -351,7 +363,9 @@ class ViewTrackingController(Controller):
             result["history"] = history.reshape(shape + (int(max_steps) + 1, DOF))
         return result
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
+    def predict(self, observation: np.ndarray | dict[str, np.ndarray], state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """SB3 ``predict``: observation dict with ``q``, ``p_target``, ``R_target`` (and optional ``dt``)."""
         obs = self._observation_dict(observation, ("q", "p_target", "R_target"))
         target = (obs["p_target"], as_rotation_field(obs["R_target"]))

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.envs.spec import EnvSpec
 
@@ -35,7 +37,8 @@ def _improvement(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean(greater + 0.5 * ties))
 
 
-def probability_of_improvement(x, y, higher_is_better: bool = True, reps: int = 2000, seed: int = 0) -> dict:
+def probability_of_improvement(x: ArrayLike, y: ArrayLike, higher_is_better: bool = True, reps: int = 2000,
+                               seed: int = 0) -> dict[str, float]:
     """rliable's probability of improvement of X over Y, with a 95 % stratified-bootstrap CI.
 
     ``x`` (runs_x, tasks) and ``y`` (runs_y, tasks) are scores on the same tasks. The point estimate is
@@ -55,7 +58,7 @@ def probability_of_improvement(x, y, higher_is_better: bool = True, reps: int = 
         x, y = -x, -y
     point = float(metrics.probability_of_improvement(x, y))
     rng = np.random.default_rng(seed)
-    tasks = x.shape[1]
+    tasks: int = x.shape[1]
     draws = np.empty(reps)
     for r in range(reps):
         columns = rng.integers(tasks, size=tasks)[None, :]
@@ -82,13 +85,13 @@ def add_improvement(spec: EnvSpec, table: dict, results: dict, learned: list) ->
                                       "on": f"{spec.headline_metric} per episode, non-grid test task sets"}
 
 
-def training_cost(run_dir) -> dict:
+def training_cost(run_dir: str | Path) -> dict[str, float | None]:
     """{env_steps, wall_clock_s} of one run: the last evaluation's step count (``evaluations.npz``, else
     ``config.yml``'s ``total_timesteps``) and the wall-clock at it (``wall_clock.csv``; None if not recorded)."""
     import yaml
 
     run_dir = Path(run_dir)
-    steps = None
+    steps: int | None = None
     if (run_dir / "evaluations.npz").is_file():
         with np.load(run_dir / "evaluations.npz") as data:
             steps = int(data["timesteps"][-1])
@@ -99,7 +102,7 @@ def training_cost(run_dir) -> dict:
             "wall_clock_s": None if clock is None else float(clock[1][-1])}
 
 
-def read_wall_clock(run_dir) -> tuple[np.ndarray, np.ndarray] | None:
+def read_wall_clock(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
     """(timesteps, elapsed seconds) of a run's ``wall_clock.csv``, or None when the run has none."""
     path = Path(run_dir) / WALL_CLOCK_FILE
     if not path.is_file():
@@ -117,9 +120,9 @@ def add_training(table: dict, learned: list) -> None:
         per_run = [training_cost(run) for run in run_dirs]
         steps = [r["env_steps"] for r in per_run]
         clocks = [r["wall_clock_s"] for r in per_run]
-        entry = {"env_steps_per_run": steps, "wall_clock_s_per_run": clocks}
+        entry: dict[str, Any] = {"env_steps_per_run": steps, "wall_clock_s_per_run": clocks}
         if None not in clocks:
-            entry["wall_clock_s_mean"] = float(np.mean(clocks))
+            entry["wall_clock_s_mean"] = float(np.mean(cast(list[float], clocks)))
         table[method][TRAINING] = entry
 
 

@@ -28,12 +28,15 @@ import dataclasses
 import os
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.validation import choice, integer, number
+
+if TYPE_CHECKING:
+    from minari import MinariDataset
 
 NAMESPACE = "continuum-gym"
 DATASET_SPLITS = ("train", "validation", "test")
@@ -96,7 +99,7 @@ def collect_episodes(env_id: str, controller: str, *, split: str = "train", epis
         infos = {key: [value] for key, value in _storable(info).items()}
         done = False
         while not done:
-            action = np.zeros(env.action_space.shape, dtype=np.float32)
+            action = np.zeros(cast(gym.spaces.Box, env.action_space).shape, dtype=np.float32)
             if noise > 0:
                 action = np.clip(noise * rng.standard_normal(action.shape), -1.0, 1.0).astype(np.float32)
             obs, reward, terminated, truncated, info = env.step(action)
@@ -128,7 +131,7 @@ def _storable(info: dict) -> dict:
 
 def create_dataset(env_id: str, controller: str, *, split: str = "train", episodes: int = 10,
                    noise: float = 0.0, seed: int = 0, env_kwargs: dict | None = None, root: str | Path | None = None,
-                   overwrite: bool = False, progress: bool = False):
+                   overwrite: bool = False, progress: bool = False) -> MinariDataset:
     """Record and write one dataset (see the module docstring); returns the ``minari.MinariDataset``.
 
     Args:
@@ -199,7 +202,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     try:
         import minari  # noqa: F401
     except ImportError:

@@ -4,15 +4,21 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from mpl_toolkits.mplot3d import Axes3D
+
+    from continuum_gym.robots import MultiBackboneRobot
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="results/demo", help="output directory for demo.png (default: %(default)s)")
 
 
-def _pose_line(name, p, R):
+def _pose_line(name: str, p: np.ndarray, R: np.ndarray) -> str:
     from continuum_gym.robots import rotation_vector
 
     rotvec = rotation_vector(R)
@@ -20,7 +26,8 @@ def _pose_line(name, p, R):
             f"log R = [{rotvec[0]:7.4f} {rotvec[1]:7.4f} {rotvec[2]:7.4f}] rad")
 
 
-def occlusion_snapshots():
+def occlusion_snapshots() -> tuple[MultiBackboneRobot, np.ndarray, np.ndarray,
+                                 dict[str, tuple[np.ndarray, np.ndarray]]]:
     """Configurations of paper 000 to draw: task (a) start/end, circle snapshots (min-norm vs min-potential)."""
     from continuum_gym.baselines import MinimumNorm, ProjectedGradient
     from continuum_gym.baselines.scenarios import HOLD_ITERATIONS, CircleTask
@@ -43,7 +50,7 @@ def occlusion_snapshots():
     return robot, q_hold, p_des, circle
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -73,7 +80,7 @@ def run(args) -> int:
              "position p in mm, orientation log R as a rotation vector in rad"]
 
     # (a) hold the pose: start and end of the projected gradient.
-    ax = fig.add_subplot(2, 2, 1, projection="3d")
+    ax = cast("Axes3D", fig.add_subplot(2, 2, 1, projection="3d"))
     draw_cone(ax, 0.0)
     draw_endoscope_shaft(ax, 0.0)
     for q, color, label in ((robot.psi_a, "tab:red", "start psi_a"), (q_hold[-1], "tab:blue", "after 1500 it")):
@@ -88,7 +95,7 @@ def run(args) -> int:
     ax.legend(loc="upper left", fontsize=8)
 
     # (b) the circle: min-norm vs min-potential at the same instant, each with its endoscope rotation.
-    ax = fig.add_subplot(2, 2, 2, projection="3d")
+    ax = cast("Axes3D", fig.add_subplot(2, 2, 2, projection="3d"))
     k = 2500
     ax.plot(*(circle_path * 1e3).T, color="0.5", linewidth=0.8, label="desired circle (r = 10 mm)")
     everything = [circle_path * 1e3]
@@ -107,7 +114,7 @@ def run(args) -> int:
 
     # (c, d) the case studies of paper 001.
     for panel, (case, q_dv) in enumerate(CASE_STUDIES.items(), start=3):
-        ax = fig.add_subplot(2, 2, panel, projection="3d")
+        ax = cast("Axes3D", fig.add_subplot(2, 2, panel, projection="3d"))
         target = davinci.target_pose(q_dv)
         p_dv, R_dv = davinci.forward_kinematics(q_dv)
         ax.plot(*zip([0, 0, 0], p_dv * 1e3), color="k", linewidth=4, label="da Vinci stem (RCM at origin)")

@@ -3,23 +3,30 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.geometry.frustum import Frustum
-from continuum_gym.geometry.lens_cone import lens_origin, lens_rotation, resolve_cone
+from continuum_gym.geometry.lens_cone import LensCone, lens_origin, lens_rotation, resolve_cone
+
+if TYPE_CHECKING:
+    from matplotlib.typing import ColorType
+    from mpl_toolkits.mplot3d import Axes3D
 
 MM = 1e3
 
 
-def draw_backbone(ax, points, color, label: str | None = None, linewidth=3.0) -> None:
+def draw_backbone(ax: Axes3D, points: ArrayLike, color: ColorType, label: str | None = None,
+                  linewidth: float = 3.0) -> None:
     """A sampled centre line (n, 3) in m."""
     pts = np.asarray(points) * MM
     ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, linewidth=linewidth, label=label, solid_capstyle="round")
     ax.scatter(*pts[-1], color=color, s=18)
 
 
-def draw_frame(ax, p, R, length=0.008) -> None:
+def draw_frame(ax: Axes3D, p: ArrayLike, R: np.ndarray, length: float = 0.008) -> None:
     """Axes of a frame (x red, y green, z blue); ``length`` in m."""
     for k, color in enumerate(("tab:red", "tab:green", "tab:blue")):
         end = (np.asarray(p) + length * R[:, k]) * MM
@@ -27,7 +34,8 @@ def draw_frame(ax, p, R, length=0.008) -> None:
         ax.plot([start[0], end[0]], [start[1], end[1]], [start[2], end[2]], color=color, linewidth=1.2)
 
 
-def draw_cone(ax, gamma, cone=None, length=0.075, color="tab:orange", n=24, alpha=0.12) -> None:
+def draw_cone(ax: Axes3D, gamma: float, cone: LensCone | None = None, length: float = 0.075,
+              color: ColorType = "tab:orange", n: int = 24, alpha: float = 0.12) -> None:
     """The angled-lens view cone for rotation ``gamma`` (rad), ``length`` (m) along its axis."""
     cone = resolve_cone(cone)
     vertex = lens_origin(gamma, cone)
@@ -52,14 +60,16 @@ def draw_cone(ax, gamma, cone=None, length=0.075, color="tab:orange", n=24, alph
         pass
 
 
-def draw_endoscope_shaft(ax, gamma, cone=None, length=0.03, color="0.35") -> None:
+def draw_endoscope_shaft(ax: Axes3D, gamma: float, cone: LensCone | None = None, length: float = 0.03,
+                        color: ColorType = "0.35") -> None:
     """The rigid endoscope as a line from its lens back along -z_w (m)."""
     vertex = lens_origin(gamma, resolve_cone(cone)) * MM
     ax.plot([vertex[0], vertex[0]], [vertex[1], vertex[1]], [vertex[2], vertex[2] - length * MM], color=color,
             linewidth=5, solid_capstyle="butt")
 
 
-def draw_frustum(ax, p, R, color, frustum=None, alpha=0.08, label: str | None = None) -> None:
+def draw_frustum(ax: Axes3D, p: ArrayLike, R: ArrayLike, color: ColorType, frustum: Frustum | None = None,
+                 alpha: float = 0.08, label: str | None = None) -> None:
     """A square view frustum at camera pose (p in m, R with z the optical axis)."""
     frustum = frustum or Frustum()
     v = frustum.vertices(p, R) * MM
@@ -79,7 +89,7 @@ def draw_frustum(ax, p, R, color, frustum=None, alpha=0.08, label: str | None = 
         pass
 
 
-def set_equal_3d(ax, points_mm, margin=5.0) -> None:
+def set_equal_3d(ax: Axes3D, points_mm: ArrayLike, margin: float = 5.0) -> None:
     """Equal aspect around a set of points (mm)."""
     pts = np.asarray(points_mm).reshape(-1, 3)
     centre = (pts.max(axis=0) + pts.min(axis=0)) / 2

@@ -16,7 +16,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from continuum_gym.evaluation.tables import (
     markdown,
 )
 
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
 OCCLUSION = OCCLUSION_SPEC.env_id
 VIEW = VIEW_SPEC.env_id
 POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
@@ -51,7 +54,7 @@ class MethodRun:
     algo: str | None = None  #: the algorithm that trained it (``ppo``, ``sac``, ``td3``), if known
 
 
-def discover_policies(directory, skipped: dict | None = None) -> dict:
+def discover_policies(directory: str | Path, skipped: dict | None = None) -> dict[str, dict[str, list[Path]]]:
     """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``.
 
     A run whose ``config.yml`` is unreadable, names no env or has no ``model.zip`` beside it is reported
@@ -60,7 +63,7 @@ def discover_policies(directory, skipped: dict | None = None) -> dict:
     """
     import yaml
 
-    found: dict = {}
+    found: dict[str, dict[str, list[Path]]] = {}
     skipped = {} if skipped is None else skipped
     directory = Path(directory)
     if not directory.is_dir():
@@ -100,13 +103,13 @@ def method_name(base: str | None, algo: str | None) -> str:
     return name if algo in (None, "ppo") else f"{name}_{algo}"
 
 
-def load_policy(run: Path):
+def load_policy(run: Path) -> tuple[BaseAlgorithm, dict[str, Any]]:
     """(SB3 model, its run's config dict) of a run directory."""
     import yaml
     from stable_baselines3 import PPO, SAC, TD3
 
     config = yaml.safe_load((run / "config.yml").read_text())
-    algorithms = {"ppo": PPO, "sac": SAC, "td3": TD3}
+    algorithms: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
     if config.get("algo") not in algorithms:
         raise ValueError(f"policy {run}: algo must be one of {sorted(algorithms)}, got {config.get('algo')!r}")
     return algorithms[config["algo"]].load(run / "model.zip", device="cpu"), config
@@ -237,9 +240,10 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         try:
             if declared is not None and declared != core.single_observation_space.shape:
                 built = {k: v for k, v in kwargs.items() if k not in ("task", "task_split", "grid")}
+                robot = core.config.to_dict().get("robot")  # type: ignore[attr-defined]  # undeclared in BatchedCore
                 raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
                                   f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
-                                  f"{core.config.to_dict().get('robot')}); pass the keywords it was trained with "
+                                  f"{robot}); pass the keywords it was trained with "
                                   "(--env-kwargs, or its registered id with --import)")
             result = run_episodes(core, policy, np.arange(count), record=task_set.task == spec.trace_task)
         except PolicyError as error:
@@ -425,7 +429,7 @@ def parse_env_kwargs(text: str | None) -> dict:
     return value
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     try:
         env_ids = list(args.env or ENV_SPECS)
         for env_id in env_ids:

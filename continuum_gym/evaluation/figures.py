@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.envs.spec import EnvSpec, get_spec
+from continuum_gym.envs.spec import EnvSpec, Metric, get_spec
 
 #: What a per-step trace value is, for axis labels: (words, higher is better).
 TRACE_LABELS = {"voi": ("VOI", False), "or": ("overlap ratio OR", True), "in_view": ("tip in view", True),
@@ -114,7 +114,7 @@ def draw_coverage_maps(spec: EnvSpec, results: dict, table: dict, path: Path) ->
     return path
 
 
-def metric_axis(metric, prefix: str = "", sep: str = ", ") -> str:
+def metric_axis(metric: Metric, prefix: str = "", sep: str = ", ") -> str:
     """An axis label naming the metric, its unit ("dimensionless" if it has none) and the better direction."""
     unit = metric.display_unit or metric.unit or "dimensionless"
     return f"{prefix}{metric.label} ({unit}){sep}{_direction(metric.higher_is_better)}"

@@ -12,17 +12,18 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Any
 
 TMP_SUFFIX = ".tmp"
 
 
-def temporary_path(path) -> Path:
+def temporary_path(path: str | Path) -> Path:
     """Where ``write_bytes_atomic`` stages ``path`` in this process."""
     path = Path(path)
     return path.with_name(f".{path.name}.{os.getpid()}{TMP_SUFFIX}")
 
 
-def temporary_files(folder) -> list[Path]:
+def temporary_files(folder: str | Path) -> list[Path]:
     """Staging files of atomic writes in ``folder`` (this module's, and the older ``.<stem>.tmp.<ext>``)."""
     folder = Path(folder)
     if not folder.is_dir():
@@ -31,7 +32,7 @@ def temporary_files(folder) -> list[Path]:
                   if p.is_file() and p.name.startswith(".") and (p.name.endswith(TMP_SUFFIX) or ".tmp." in p.name))
 
 
-def fsync_directory(folder) -> None:
+def fsync_directory(folder: str | Path) -> None:
     """Make a rename or unlink in ``folder`` durable (a no-op where directories cannot be opened)."""
     try:
         fd = os.open(folder, os.O_RDONLY)
@@ -45,7 +46,7 @@ def fsync_directory(folder) -> None:
         os.close(fd)
 
 
-def write_bytes_atomic(path, data: bytes) -> Path:
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically and durably (see the module docstring)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -64,16 +65,16 @@ def write_bytes_atomic(path, data: bytes) -> Path:
     return path
 
 
-def write_text_atomic(path, text: str) -> Path:
+def write_text_atomic(path: str | Path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically and durably."""
     return write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def write_json_atomic(path, payload) -> Path:
+def write_json_atomic(path: str | Path, payload: Any) -> Path:
     return write_text_atomic(path, json.dumps(payload, indent=1, default=_jsonable) + "\n")
 
 
-def _jsonable(value):
+def _jsonable(value: Any) -> Any:
     import numpy as np
 
     if isinstance(value, np.ndarray):

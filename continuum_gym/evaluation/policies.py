@@ -17,9 +17,11 @@ from __future__ import annotations
 import importlib
 import inspect
 import sys
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 class PolicyError(ValueError):
@@ -74,7 +76,9 @@ class Predictor:
         self.steps += 1
         return actions
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = True):
+    def predict(self, observation: ArrayLike, state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = True
+                ) -> tuple[Any, tuple[np.ndarray, ...] | None]:
         """SB3's ``predict`` signature, for code that expects an SB3 policy."""
         observation = np.asarray(observation, dtype=np.float32)
         return self._act(observation), state

@@ -14,7 +14,9 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import cast
 
+from continuum_gym.envs.config import OcclusionConfig, ViewTrackingConfig
 from continuum_gym.envs.spec import OCCLUSION_SPEC, VIEW_SPEC, EnvSpec
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH as SHIPPED
 
@@ -78,9 +80,12 @@ def _compute(spec: EnvSpec, env_kwargs: dict, episodes: int, grid: int, split: s
     if spec.env_id == OCCLUSION_SPEC.env_id:
         from continuum_gym.evaluation.optimum.occlusion import env_hold_test_optimum
 
-        return {"hold_test": env_hold_test_optimum(episodes, limits=config.limits, workers=workers, progress=progress,
-                                                   robot=config.robot, cone=config.cone, split=split)}
+        occlusion = cast(OcclusionConfig, config)  # the occlusion spec's config class
+        return {"hold_test": env_hold_test_optimum(episodes, limits=occlusion.limits, workers=workers,
+                                                   progress=progress, robot=occlusion.robot, cone=occlusion.cone,
+                                                   split=split)}
     from continuum_gym.evaluation.optimum.view import coverage_optimum
 
-    return {"coverage": coverage_optimum(grid, workers=workers, progress=progress, global_check=0, robot=config.robot,
-                                         davinci=config.davinci)}
+    view = cast(ViewTrackingConfig, config)  # the other built-in spec's
+    return {"coverage": coverage_optimum(grid, workers=workers, progress=progress, global_check=0, robot=view.robot,
+                                         davinci=view.davinci)}

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,13 +32,14 @@ PAPER = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--quick", action="store_true", help="reduced version for tests (11 x 11 grid, 10 sweep starts)")
+    parser.add_argument("--quick", action="store_true",
+                        help="reduced version for tests (11 x 11 grid, 10 sweep starts)")
     parser.add_argument("--json", help="write the results as nested JSON to this path")
     parser.add_argument("--out", default="results/reproduce", help="directory for figures and the Markdown table")
     parser.add_argument("--grid", type=int, default=None, help="coverage grid points per axis (default 41; 11 quick)")
 
 
-def markdown_table(results) -> str:
+def markdown_table(results: dict[str, Any]) -> str:
     from continuum_gym.baselines.scenarios import CASE_STUDIES
 
     h, s, c = results["hold"], results["hold_sweep"], results["circle"]
@@ -86,7 +88,7 @@ def markdown_table(results) -> str:
     return "\n".join(lines)
 
 
-def draw_figures(results, out: Path) -> list:
+def draw_figures(results: dict[str, Any], out: Path) -> list[Path]:
     import matplotlib
 
     from continuum_gym.baselines.scenarios import CASE_STUDIES, VIEW_DT
@@ -162,7 +164,7 @@ def draw_figures(results, out: Path) -> list:
     return paths
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     if args.grid is not None and args.grid < 2:
         print(f"continuum-gym reproduce: --grid must be an integer >= 2 (points per axis); got {args.grid}",
               file=sys.stderr)

@@ -8,8 +8,10 @@ random-start sweep, the circle, the two case studies and the coverage map (see
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.baselines import (
     DimensionReduced,
@@ -42,7 +44,7 @@ SWEEP_STARTS = 60
 
 
 # ---------------------------------------------------------------------- parts
-def hold_part(robot, n_starts: int, seed: int):
+def hold_part(robot: MultiBackboneRobot, n_starts: int, seed: int) -> tuple[dict[str, Any], dict[str, Any]]:
     p0, R0 = robot.forward_kinematics(robot.psi_a)
     p_des = np.broadcast_to(p0, (HOLD_ITERATIONS, 3))
     R_des = np.broadcast_to(R0, (HOLD_ITERATIONS, 3, 3))
@@ -83,7 +85,7 @@ def hold_part(robot, n_starts: int, seed: int):
     return hold, sweep
 
 
-def circle_part(robot):
+def circle_part(robot: MultiBackboneRobot) -> dict[str, Any]:
     task = CircleTask()
     q0 = task.start_configuration()
     _, R0 = robot.forward_kinematics(q0)
@@ -113,13 +115,13 @@ def circle_part(robot):
     return result
 
 
-def _overlap(endo, davinci, q, q_davinci):
+def _overlap(endo: ContinuumEndoscope, davinci: DaVinciEndoscope, q: ArrayLike, q_davinci: ArrayLike) -> np.ndarray:
     p_c, R_c = endo.forward_kinematics(q)
     p_d, R_d = davinci.forward_kinematics(q_davinci)
     return overlap_ratio(p_d, R_d, p_c, R_c)
 
 
-def case_part(endo, davinci):
+def case_part(endo: ContinuumEndoscope, davinci: DaVinciEndoscope) -> dict[str, Any]:
     out = {}
     for case, q_dv in CASE_STUDIES.items():
         target = davinci.target_pose(q_dv)
@@ -144,11 +146,11 @@ def case_part(endo, davinci):
     return out
 
 
-def coverage_part(endo, davinci, grid: int):
+def coverage_part(endo: ContinuumEndoscope, davinci: DaVinciEndoscope, grid: int) -> dict[str, Any]:
     targets = coverage_grid(grid)
     target_pose = davinci.target_pose(targets)
     start = np.broadcast_to(CASE_STUDY_START, (len(targets), 6))
-    out = {"grid": int(grid), "threshold": COVERAGE_THRESHOLD, "yaw_pitch_limit_rad": float(np.pi / 3)}
+    out: dict[str, Any] = {"grid": int(grid), "threshold": COVERAGE_THRESHOLD, "yaw_pitch_limit_rad": float(np.pi / 3)}
     for controller in (ResolvedRate(), DimensionReduced()):
         solved = controller.solve(start, target_pose, dt=VIEW_DT, max_steps=VIEW_MAX_STEPS)
         ratio = _overlap(endo, davinci, solved["q"], targets)
@@ -166,7 +168,7 @@ def reproduce(quick: bool = False, grid: int | None = None, progress: bool = Tru
     robot, endo, davinci = MultiBackboneRobot(), ContinuumEndoscope(), DaVinciEndoscope()
     grid = grid or (11 if quick else 41)
     n_starts = 10 if quick else SWEEP_STARTS
-    results = {"quick": bool(quick), "seconds": {}}
+    results: dict[str, Any] = {"quick": bool(quick), "seconds": {}}
     parts = [
         ("hold", lambda: hold_part(robot, n_starts, SWEEP_SEED)),
         ("circle", lambda: circle_part(robot)),

@@ -9,12 +9,16 @@ best-OR configuration it can hold, which is the coverage a perfect residual poli
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import minimize
 
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD, coverage_grid
-from continuum_gym.baselines.view_tracking import make_view_scratch, view_rates_kernel
+from continuum_gym.baselines.view_tracking import ViewTrackingController, make_view_scratch, view_rates_kernel
 from continuum_gym.evaluation.optimum.view import (
     overlap_of_configuration,
     view_tracking_optimum,
@@ -30,7 +34,8 @@ HOLD_MARGIN = 0.9
 PENALTY = 5.0
 
 
-def hold_effort(q, q_davinci, residual_scale, controller=None, control_dt=CONTROL_DT):
+def hold_effort(q: ArrayLike, q_davinci: ArrayLike, residual_scale: float,
+                controller: ViewTrackingController | None = None, control_dt: float = CONTROL_DT) -> np.ndarray:
     """Hold effort of each configuration (n,): the largest |action| that cancels the baseline's rate at q.
 
     Args:
@@ -65,7 +70,9 @@ class _EffortKernel:
         return float(np.max(np.abs(self.rates) / self.reach))
 
 
-def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restarts=3, seed: int = 0):
+def holdable_optimum(q_star: ArrayLike, q_davinci: ArrayLike, residual_scale: float,
+                     controller: ViewTrackingController | None = None, restarts: int = 3, seed: int = 0
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Replace each configuration the residual cannot hold by the best-OR one it can hold nearby.
 
     Nelder-Mead from q* (and ``restarts - 1`` starts jittered by 0.05) within the joint limits; a result
@@ -85,7 +92,8 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
         return overlap_of_configuration(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], robot, frustum.tan_half,
                                         frustum.near, frustum.far)
 
-    effort_kernel = _EffortKernel(controller, positive(residual_scale, "residual_scale", "fraction of the action scale"))
+    effort_kernel = _EffortKernel(controller,
+                                  positive(residual_scale, "residual_scale", "fraction of the action scale"))
 
     def effort(q, k):
         return effort_kernel(q, p_t[k], R_t[k])
@@ -108,7 +116,8 @@ def holdable_optimum(q_star, q_davinci, residual_scale, controller=None, restart
     return q_out, overlaps, efforts
 
 
-def reach_ceiling(residual_scales, grid: int = 21, effort="quick", workers: int = 2, progress: bool = True) -> dict:
+def reach_ceiling(residual_scales: Iterable[float], grid: int = 21, effort: str = "quick", workers: int = 2,
+                  progress: bool = True) -> dict[str, Any]:
     """Coverage (%) of the paper's grid that a perfect joint-rate residual of each scale reaches and holds.
 
     Returns {"optimum_percent": ..., "ceiling_percent": {scale: ...}}: a point counts if its holdable
@@ -116,7 +125,8 @@ def reach_ceiling(residual_scales, grid: int = 21, effort="quick", workers: int 
     """
     q_davinci = coverage_grid(grid)
     optimum = view_tracking_optimum(q_davinci, effort=effort, workers=workers, progress=progress)
-    result = {"optimum_percent": float(np.mean(optimum["overlap"] > COVERAGE_THRESHOLD) * 100), "ceiling_percent": {}}
+    result: dict[str, Any] = {"optimum_percent": float(np.mean(optimum["overlap"] > COVERAGE_THRESHOLD) * 100),
+                              "ceiling_percent": {}}
     for scale in residual_scales:
         _, overlaps, efforts = holdable_optimum(optimum["q"], q_davinci, scale)
         held = (overlaps > COVERAGE_THRESHOLD) & (efforts <= 1.0)

@@ -7,9 +7,19 @@ its spec says (``EnvSpec.episode_metrics``).
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any, Protocol
 
+import numpy as np
+from numpy.typing import ArrayLike
+
+from continuum_gym.envs.batched import BatchedCore
 from continuum_gym.envs.spec import get_spec, registered_kwargs
+
+
+class Progress(Protocol):
+    """What :func:`run_episodes` updates once per step: a ``tqdm`` bar, for one."""
+
+    def update(self, n: int = 1) -> object: ...
 
 
 class ZeroResidual:
@@ -18,12 +28,14 @@ class ZeroResidual:
     def __init__(self, action_dim: int) -> None:
         self.action_dim = int(action_dim)
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
+    def predict(self, observation: ArrayLike, state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         observation = np.asarray(observation)
         return np.zeros(observation.shape[:-1] + (self.action_dim,), dtype=np.float32), state
 
 
-def make_core(env_id: str, num_envs: int, **env_kwargs):
+def make_core(env_id: str, num_envs: int, **env_kwargs: Any) -> BatchedCore:
     """A batched core of ``env_id`` with ``num_envs`` rows (any id registered to the library's entry points).
 
     A user's registered id is built as ``gym.make`` builds it: its registered keyword arguments, then
@@ -32,7 +44,8 @@ def make_core(env_id: str, num_envs: int, **env_kwargs):
     return get_spec(env_id).make_core(num_envs, **{**registered_kwargs(env_id), **env_kwargs})
 
 
-def run_episodes(core, policy, task_ids, progress: bool | None = None, record: bool = False) -> dict:
+def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: Progress | None = None,
+                 record: bool = False) -> dict[str, np.ndarray]:
     """Run one episode per task id (all in one batch) until each ends; returns per-episode metrics.
 
     Args:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 DEFAULT_REPS = 2000
 
@@ -21,7 +22,7 @@ def _aggregates(scores: np.ndarray) -> np.ndarray:
     return np.array([metrics.aggregate_mean(scores), metrics.aggregate_iqm(scores)])
 
 
-def summarize(scores, reps: int = DEFAULT_REPS, seed: int = 0) -> dict:
+def summarize(scores: ArrayLike, reps: int = DEFAULT_REPS, seed: int = 0) -> dict[str, float]:
     """{mean, iqm, ci_low, ci_high, iqm_ci_low, iqm_ci_high, n_runs, n_tasks} of a (runs, tasks) score array."""
     from rliable import library
 

@@ -3,9 +3,11 @@ offline optimum's reference rows, ``headroom_closed``, and the Markdown the CLI 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from continuum_gym.envs.spec import EnvSpec, get_spec
+from continuum_gym.envs.spec import EnvSpec, Metric, get_spec
 
 #: headroom_closed, computed for learned methods, is better when higher.
 HEADROOM = "headroom_closed"
@@ -20,7 +22,7 @@ def clipped_fractions(results: dict) -> dict:
     return out
 
 
-def grid_scores(task_result: dict, metric) -> np.ndarray:
+def grid_scores(task_result: dict, metric: Metric) -> np.ndarray:
     """(seeds, grid points) of [grid metric > threshold]: its mean x 100 is e.g. the coverage percentage."""
     return np.stack(task_result["scores"][metric.grid_metric]) > metric.threshold
 
@@ -70,6 +72,7 @@ def reference_rows(spec: EnvSpec, results: dict, optimum: dict, grid: int | None
         if not cached or ref.values not in cached:
             continue
         values = np.asarray(cached[ref.values], dtype=float)
+        row: dict[str, Any]
         if ref.kind == "coverage":
             metric = spec.metric(ref.metric)
             if grid is not None and cached.get("grid") != grid:
@@ -109,7 +112,7 @@ def add_headroom(spec: EnvSpec, table: dict, results: dict, bases: dict | None =
         if method in spec.baselines or bases.get(method) == method:
             continue
         base = bases.get(method)
-        if base not in results:
+        if base is None or base not in results:
             base = spec.headline_baseline
         if base not in results or task not in results[base]:
             continue

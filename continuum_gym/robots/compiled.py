@@ -35,8 +35,9 @@ import json
 import os
 import platform
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
 import llvmlite
 import numba
@@ -49,7 +50,7 @@ PORTABLE_CPU = "generic"
 
 # The layer a ``continuum-gym precompile`` worker writes; a module global, not thread-local: batch
 # chunks compile on worker threads.
-_writing = {"layer": None}
+_writing: dict[str, str | None] = {"layer": None}
 
 
 def precompiled_dir() -> Path:
@@ -129,7 +130,7 @@ def source_digest() -> str:
     return digest_of(source_hashes(known if isinstance(known, dict) else None))
 
 
-def portable_magic(codegen) -> tuple:
+def portable_magic(codegen: Any) -> tuple[str, str, str]:
     """numba's codegen key for LLVM's generic CPU of this target triple (``NUMBA_CPU_NAME=generic``)."""
     return (codegen.magic_tuple()[0], PORTABLE_CPU, "")
 
@@ -141,10 +142,10 @@ class writing_precompiled:
     its own); a kernel is looked up in every layer.
     """
 
-    def __init__(self, layer: str):
+    def __init__(self, layer: str) -> None:
         self.layer = layer
 
-    def __enter__(self) -> "writing_precompiled":
+    def __enter__(self) -> writing_precompiled:
         _writing["layer"] = self.layer
         return self
 
@@ -155,7 +156,7 @@ class writing_precompiled:
 class PrecompiledFirstCache(FunctionCache):
     """numba's per-function cache, consulted after the precompiled set (see the module docstring)."""
 
-    def __init__(self, py_func: Callable):
+    def __init__(self, py_func: Callable) -> None:
         super().__init__(py_func)
         self._module_dir = py_func.__module__.replace(".", "-")
         # numba names its entries <module>.<qualname>-<first line>: in the set, without the line, so that
@@ -163,7 +164,7 @@ class PrecompiledFirstCache(FunctionCache):
         qualname = py_func.__qualname__.replace("<locals>", "").replace("<", "").replace(">", "")
         self._filename_base = f"{py_func.__module__}.{qualname}-py{sys.version_info[0]}{sys.version_info[1]}"
         self._set_dir = precompiled_dir()
-        self._layers = {}
+        self._layers: dict[str, IndexDataCacheFile] = {}
 
     def _layer(self, name: str) -> IndexDataCacheFile:
         if name not in self._layers:
@@ -210,7 +211,7 @@ class PrecompiledFirstCache(FunctionCache):
         return None
 
 
-def kernel(func: Callable | None = None, *, borrows: bool = False, **options):
+def kernel(func: Callable | None = None, *, borrows: bool = False, **options: Any) -> Any:
     """``numba.njit(cache=True, **options)`` whose compiled code also comes from the precompiled set.
 
     Use as ``@kernel`` or ``@kernel(inline="always")``; options are numba's.

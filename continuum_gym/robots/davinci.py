@@ -148,7 +148,7 @@ class DaVinciEndoscope:
     alpha_convention = property(lambda self: self._convention, doc='"eq2" (default) or "eq1".')
 
     @property
-    def joint_limits(self):
+    def joint_limits(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)``, each shape (4,) (Table II, fresh copies).
 
         L_dV in [0, 0.1] m, yaw and pitch in [-pi/3, pi/3], roll in [-pi, pi].
@@ -157,27 +157,27 @@ class DaVinciEndoscope:
 
     # -- named configurations -----------------------------------------------------------------
     @property
-    def straight(self):
+    def straight(self) -> np.ndarray:
         """All zeros: stem along z_w, camera at the remote centre (L_dV = 0 m)."""
         return np.zeros(DOF)
 
     @property
-    def home(self):
+    def home(self) -> np.ndarray:
         """Centre of the coverage map (paper-notes §2.6): L_dV = 0.065 m, yaw = pitch = roll = 0."""
         return np.array([0.065, 0.0, 0.0, 0.0])
 
     @property
-    def case1(self):
+    def case1(self) -> np.ndarray:
         """Case study 1 (paper-notes §2.1): L_dV = 0.06088 m, yaw 0.5, pitch -0.4, roll 0."""
         return np.array([0.06088, 0.5, -0.4, 0.0])
 
     @property
-    def case2(self):
+    def case2(self) -> np.ndarray:
         """Case study 2 (paper-notes §2.1): L_dV = 0.0625 m, yaw -0.9, pitch 0.7, roll 0."""
         return np.array([0.0625, -0.9, 0.7, 0.0])
 
     @property
-    def named_configurations(self):
+    def named_configurations(self) -> dict[str, np.ndarray]:
         """``{"straight", "home", "case1", "case2"}`` -> fresh arrays."""
         return {"straight": self.straight, "home": self.home, "case1": self.case1, "case2": self.case2}
 
@@ -190,7 +190,7 @@ class DaVinciEndoscope:
         _stem_batch(flat, out)
         return out.reshape(q.shape[:-1] + (3, 3))
 
-    def _poses(self, q: ArrayLike):
+    def _poses(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q = as_configuration(q, DOF)
         flat = np.ascontiguousarray(q.reshape(-1, DOF))
         n = flat.shape[0]
@@ -199,7 +199,7 @@ class DaVinciEndoscope:
         lead = q.shape[:-1]
         return p_cam.reshape(lead + (3,)), w_R_cam.reshape(lead + (3, 3)), p_t.reshape(lead + (3,))
 
-    def forward_kinematics(self, q: ArrayLike):
+    def forward_kinematics(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Camera frame in {w}: ``(p (..., 3) in m, R (..., 3, 3))``.
 
         ``p = R3 [0, 0, L_dV]`` (the stem tip, eq 2 first term); ``R = R3 Rx(-alpha)`` (eq 1 corrected,
@@ -208,7 +208,7 @@ class DaVinciEndoscope:
         p_cam, w_R_cam, _ = self._poses(q)
         return p_cam, w_R_cam
 
-    def target_pose(self, q: ArrayLike):
+    def target_pose(self, q: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Visual target frame the continuum endoscope must reach: ``(w_p_dVt (..., 3) in m, w_R_dVt)``.
 
         ``w_p_dVt = cam + R3 Le [0, sin alpha, cos alpha]`` (eq 2), ``w_R_dVt = R3 Rx(-alpha)`` (eq 1
@@ -217,7 +217,7 @@ class DaVinciEndoscope:
         _, w_R_cam, p_t = self._poses(q)
         return p_t, w_R_cam
 
-    def target_point(self, q: ArrayLike):
+    def target_point(self, q: ArrayLike) -> np.ndarray:
         """Visual target point ``w_p_dVt`` (..., 3) in m (eq 2)."""
         return self._poses(q)[2]
 

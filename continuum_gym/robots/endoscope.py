@@ -20,6 +20,7 @@ segment terms of ``continuum_gym.robots.segment``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -103,20 +104,22 @@ class ContinuumEndoscope:
     joint_names = ("L0", "phi", "theta1", "delta1", "theta2", "delta2")
 
     def __init__(self, L1: float = 0.020, Lm: float = 0.006, L2: float = 0.030, Lc: float = 0.020,
-                 Le: float = 0.120, joint_limits=None) -> None:
+                 Le: float = 0.120, joint_limits: Sequence[ArrayLike] | None = None) -> None:
         self._args = EndoscopeKernelArgs(positive(L1, "L1", "m"), positive(Lm, "Lm", "m"), positive(L2, "L2", "m"),
                                          positive(Lc, "Lc", "m"), positive(Le, "Le", "m"))
         self._geom = _read_only(self._args)
+        lower: tuple[float, ...] | np.ndarray
+        upper: tuple[float, ...] | np.ndarray
         if joint_limits is None:
             lower, upper = PAPER_LOWER, PAPER_UPPER
         else:
             try:
-                lower, upper = joint_limits
+                given_lower, given_upper = joint_limits
             except (TypeError, ValueError):
                 raise ValueError("joint_limits must be (lower, upper), each 6 values [L0 (m), phi, theta1, delta1, "
                                  f"theta2, delta2 (rad)]; got {joint_limits!r}") from None
-            lower = as_array(lower, "joint_limits lower", (6,)).reshape(6)
-            upper = as_array(upper, "joint_limits upper", (6,)).reshape(6)
+            lower = as_array(given_lower, "joint_limits lower", (6,)).reshape(6)
+            upper = as_array(given_upper, "joint_limits upper", (6,)).reshape(6)
             for k, (lo, hi, unit) in enumerate(_LIMIT_RANGES):
                 name = self.joint_names[k]
                 for side, value in (("lower", lower[k]), ("upper", upper[k])):

@@ -13,7 +13,6 @@ import math
 
 from continuum_gym.robots.compiled import kernel
 
-
 __all__ = ["gram_matrix", "cholesky_solve_inplace", "damped_gram_solve", "twist_gram_solve", "gram_solve_3x6"]
 
 

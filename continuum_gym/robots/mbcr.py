@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -221,7 +222,7 @@ class MultiBackboneRobot:
         """``q`` as a float64, C-contiguous (..., dof) array (finiteness is checked in the kernels)."""
         return np.ascontiguousarray(as_array(q, name, (self.dof,)))
 
-    def point_spec(self, points) -> tuple[np.ndarray, np.ndarray]:
+    def point_spec(self, points: Sequence[tuple[int, float]]) -> tuple[np.ndarray, np.ndarray]:
         """(segments (m,) int, fractions (m,)) of (segment, arc fraction) pairs; both validated.
 
         A tuple of pairs (such as ``PAPER_PSPS``) is validated once and its arrays are shared by later
@@ -289,7 +290,8 @@ class MultiBackboneRobot:
         P, JV = self.points_jacobians(q, [(segment, fraction)])
         return P[..., 0, :], JV[..., 0, :, :]
 
-    def points_jacobians(self, q: ArrayLike, points=PAPER_PSPS) -> tuple[np.ndarray, np.ndarray]:
+    def points_jacobians(self, q: ArrayLike, points: Sequence[tuple[int, float]] = PAPER_PSPS
+                         ) -> tuple[np.ndarray, np.ndarray]:
         """Positions (..., m, 3) in m and Jacobians (..., m, 3, dof) of body points (segment, fraction)."""
         segments, fractions = self.point_spec(points)
         q, batch, flat = self._flat(q)
@@ -300,7 +302,7 @@ class MultiBackboneRobot:
             _raise_not_finite(q)
         return P.reshape(batch + (m, 3)), JV.reshape(batch + (m, 3, self.dof))
 
-    def points(self, q: ArrayLike, points=PAPER_PSPS) -> np.ndarray:
+    def points(self, q: ArrayLike, points: Sequence[tuple[int, float]] = PAPER_PSPS) -> np.ndarray:
         """Positions (..., m, 3) in m of body points (segment, fraction): those of ``points_jacobians``,
         bit for bit, without computing the Jacobians."""
         segments, fractions = self.point_spec(points)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_rotations, describe
@@ -100,7 +101,7 @@ def _log_batch(flat, out):
         rotation_log(flat[i], out[i])
 
 
-def rotation_vector(R) -> np.ndarray:
+def rotation_vector(R: ArrayLike) -> np.ndarray:
     """Batched log map: rotation vectors (..., 3) in rad of rotations (..., 3, 3).
 
     ``R`` must be finite; each matrix is read as a rotation (its nearest quaternion), so pass proper

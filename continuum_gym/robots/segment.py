@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_finite, positive
@@ -125,7 +126,7 @@ def _pose_batch(bend, delta, length, p, R):
         segment_rotation(bend[i], delta[i], R[i])
 
 
-def segment_tip_pose(phi, delta, length: float) -> tuple[np.ndarray, np.ndarray]:
+def segment_tip_pose(phi: ArrayLike, delta: ArrayLike, length: float) -> tuple[np.ndarray, np.ndarray]:
     """Batched end-disk pose of one segment in its base frame.
 
     Args:
@@ -183,7 +184,8 @@ def _segment_batch(theta, delta, length, with_jacobian, out):
                     o[3 + 3 * a_ + b_] = R[a_, b_]
 
 
-def _segment_inputs(theta, delta, length):
+def _segment_inputs(theta: ArrayLike, delta: ArrayLike, length: float
+                    ) -> tuple[np.ndarray, np.ndarray, float, tuple[int, ...]]:
     length = positive(length, "length", "m")
     theta = as_finite(theta, (), "theta")
     delta = as_finite(delta, (), "delta")
@@ -195,7 +197,7 @@ def _segment_inputs(theta, delta, length):
             theta.shape)
 
 
-def endoscope_segment_pose(theta, delta, length: float) -> tuple[np.ndarray, np.ndarray]:
+def endoscope_segment_pose(theta: ArrayLike, delta: ArrayLike, length: float) -> tuple[np.ndarray, np.ndarray]:
     """Pose of {te} in {tb} of one constant-curvature segment (eqs 3 and 4, paper-notes §2.3 item 2).
 
     ``theta`` (rad, 0 = straight), ``delta`` (rad) broadcast together; ``length`` in m.
@@ -208,7 +210,7 @@ def endoscope_segment_pose(theta, delta, length: float) -> tuple[np.ndarray, np.
     return out[:, :3].reshape(shape + (3,)), out[:, 3:].reshape(shape + (3, 3))
 
 
-def endoscope_segment_jacobian(theta, delta, length: float) -> np.ndarray:
+def endoscope_segment_jacobian(theta: ArrayLike, delta: ArrayLike, length: float) -> np.ndarray:
     """Twist Jacobian of {te}'s origin in {tb} per [theta, delta] rate (eqs 5 and 6, as printed).
 
     Returns (..., 6, 2): rows [J_tv (m/rad); J_tw (rad/rad)], columns theta, delta. ``length`` in m.
