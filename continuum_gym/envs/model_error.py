@@ -196,8 +196,6 @@ PRESET_RANGES = {
                                backlash_rad=(0.02, 0.05), actuator_lag_s=(0.02, 0.06), joint_noise_rad=(0.001, 0.003),
                                tip_noise_m=(1e-4, 3e-4), delay_steps=(1, 3)),
 }
-#: Most delay any preset draws (sizes the per-row delay queues of randomised envs).
-MAX_PRESET_DELAY = max(r.delay_steps[1] for r in PRESET_RANGES.values())
 
 
 def resolve_model_error(value: Any, env: str, n_segments: int) -> str | ModelError:
@@ -355,19 +353,5 @@ def with_model_error_info(fields: tuple) -> tuple:
     return extended[1]
 
 
-def describe_model_error(value: Any) -> str:
-    """Short text of a ``model_error`` keyword for tables and logs."""
-    if isinstance(value, ModelError):
-        changed = {f.name: getattr(value, f.name) for f in fields(value)
-                   if getattr(value, f.name) != f.default}
-        return "ModelError(" + ", ".join(f"{k}={v}" for k, v in changed.items()) + ")"
-    return str(value)
-
-
-def replace(error: ModelError, **changes: Any) -> ModelError:
-    """A copy of ``error`` with ``changes`` (checked again)."""
-    return dataclasses.replace(error, **changes)
-
-
 __all__ = ["ModelError", "ModelErrorRanges", "PRESETS", "PRESET_RANGES", "resolve_model_error", "is_active",
-           "MismatchState", "value_names", "describe_model_error"]
+           "MismatchState", "value_names"]

@@ -53,6 +53,11 @@ def _pure_core(error: ModelError, n: int = 1) -> ViewTrackingCore:
     return core
 
 
+def test_is_zero():
+    assert ModelError().is_zero and ModelError(length_scale=(1.0, 1.0)).is_zero
+    assert not ModelError(backlash_rad=0.01).is_zero and not ModelError(length_scale=(1.0, 0.99)).is_zero
+
+
 def test_pure_lag_converges_like_exp():
     """Constant command c through a lag tau: the joint rate after n steps is c (1 - exp(-n dt / tau))."""
     tau = 0.05
