@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup setup-test precompile demo test test-fast bench reproduce reference-results figures docs clean
+.PHONY: setup setup-test precompile demo lint test test-fast bench reproduce reference-results figures docs clean
 
 # The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
@@ -49,7 +49,12 @@ reference-results: setup
 figures: setup
 	$(BIN)/python scripts/render_docs_images.py
 
-test: setup-test
+# Lint and types first (seconds; [tool.ruff] and [tool.mypy] in pyproject.toml), then the suite.
+lint: setup-test
+	$(BIN)/ruff check .
+	$(BIN)/mypy
+
+test: lint
 	$(BIN)/python -m pytest -q -n 2
 
 test-fast: setup-test

@@ -7,10 +7,10 @@ counts the hints themselves (mypy accepts an unannotated function silently) and 
 from __future__ import annotations
 
 import ast
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 KERNEL_DECORATORS = {"kernel", "njit", "jit"}  # numba compiles these from their own typing, not from hints

@@ -77,8 +77,9 @@ def spin_pause(typingctx):
     """x86's ``pause`` (a no-op elsewhere): a busy wait that leaves the core's pipeline to its sibling."""
 
     def codegen(context, builder, signature, args):
-        import llvmlite.ir as ir
         import platform
+
+        import llvmlite.ir as ir
 
         if platform.machine().lower() in ("x86_64", "amd64", "i386", "i686"):
             pause = builder.module.declare_intrinsic("llvm.x86.sse2.pause", fnty=ir.FunctionType(ir.VoidType(), []))

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from rliable import metrics
 
+from continuum_gym.envs.spec import get_spec
 from continuum_gym.evaluation.comparison import (
     IMPROVEMENT,
     TRAINING,
@@ -23,7 +24,6 @@ from continuum_gym.evaluation.comparison import (
 )
 from continuum_gym.evaluation.evaluate import discover_policies, evaluate_methods
 from continuum_gym.evaluation.figures import draw_learning_curves, learning_curves
-from continuum_gym.envs.spec import get_spec
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT / "reference-runs"
