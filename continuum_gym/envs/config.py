@@ -68,6 +68,20 @@ def _default(f: dataclasses.Field) -> Any:
     return None
 
 
+def _model_error_field() -> Any:
+    """The ``model_error`` keyword of every env (one definition; a dataclass field cannot be shared)."""
+    return field(default="none", metadata=spec(
+        doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
+            "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
+
+
+def _randomize_field() -> Any:
+    """The ``randomize_model_error`` keyword of every env."""
+    return field(default=False, metadata=spec(
+        doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
+        type_name="bool"))
+
+
 @dataclass(frozen=True)
 class EnvConfig:
     """What both configurations share: the keyword interface, serialisation and the Arguments table."""
@@ -303,12 +317,8 @@ class OcclusionConfig(EnvConfig):
     cone: Any = field(default=None, metadata=spec(
         doc="a `LensCone` (channel offset d_o, lens tilt alpha, half-angle beta, lens model); `None`: the paper's",
         type_name="LensCone or None"))
-    model_error: Any = field(default="none", metadata=spec(
-        doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
-            "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
-    randomize_model_error: bool = field(default=False, metadata=spec(
-        doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
-        type_name="bool"))
+    model_error: Any = _model_error_field()
+    randomize_model_error: bool = _randomize_field()
 
     def __post_init__(self) -> None:
         from continuum_gym.baselines.occlusion import OcclusionLimits
@@ -399,12 +409,8 @@ class ViewTrackingConfig(EnvConfig):
     davinci: Any = field(default=None, metadata=spec(
         doc="a `DaVinciEndoscope` (viewing angle alpha, view distance Le); `None`: the paper's 30-degree one",
         type_name="DaVinciEndoscope or None"))
-    model_error: Any = field(default="none", metadata=spec(
-        doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
-            "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
-    randomize_model_error: bool = field(default=False, metadata=spec(
-        doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
-        type_name="bool"))
+    model_error: Any = _model_error_field()
+    randomize_model_error: bool = _randomize_field()
 
     def __post_init__(self) -> None:
         from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
