@@ -149,38 +149,24 @@ def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
     return base_rate + low * residual_rate, True
 
 
-@kernel(borrows=True, no_cpython_wrapper=True)
-def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
-    """Geometry at the state of row i: next baseline command (cached), observation and metrics.
-
-    Observation layout for n segments (see the env docstring): bends (n), sin/cos delta (2n),
-    insertion, sin/cos gamma, tip position / orientation errors, desired velocity, view fraction,
-    VOI, baseline command (dof + 1), elapsed time.
-    """
-    q = state.q[i]
-    gamma = state.gamma[i]
-    n = robot.lengths.shape[0]
-    dof = q.shape[0]
-    control_dt = env.control_dt
-    sub_dt = control_dt / env.substeps
-    t = state.steps[i] * control_dt
+@kernel(inline="always")
+def cache_base_command(i, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, tip_at_qc, out):
+    """The baseline's command at the controller's joints qc into ``out.base_cmd[i]`` (and ``out.base_info[i]``),
+    cached for the next step's first substep; with ``tip_at_qc`` the tip at qc is in work.scratch (p, R, J) after."""
     scratch = work.scratch
-    # The step's scratch: the substeps that used it are done (no allocation per observation)
-    p_des = work.p_des
-    v_des = work.v_des
-    desired_point(tasks, i, t, p_des, v_des)
-    R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
     qdot = work.qdot
+    dof = qc.shape[0]
     base_cmd = out.base_cmd
     if env.has_base and custom is not None:
-        occlusion_slot_rates(custom, q, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, work.full_cmd)
-        tip_kernel(q, robot, work.ws, scratch.p, scratch.R, scratch.J)
+        occlusion_slot_rates(custom, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, work.full_cmd)
+        if tip_at_qc:
+            tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
             base_cmd[i, k] = work.full_cmd[k]
         out.base_info[i, BASE_FROZEN] = 0
         out.base_info[i, BASE_SATURATED] = 0
     elif env.has_base:
-        gd, frozen, scale = occlusion_rates_kernel(q, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
+        gd, frozen, scale = occlusion_rates_kernel(qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
                                                    work.ws, scratch, qdot)
         for k in range(dof):
             base_cmd[i, k] = qdot[k]
@@ -188,29 +174,21 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
         out.base_info[i, BASE_FROZEN] = frozen
         out.base_info[i, BASE_SATURATED] = 1 if scale < 1.0 else 0
     else:
-        tip_kernel(q, robot, work.ws, scratch.p, scratch.R, scratch.J)
+        if tip_at_qc:
+            tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
             base_cmd[i, k] = 0.0
         out.base_info[i, BASE_FROZEN] = 0
         out.base_info[i, BASE_SATURATED] = 0
-    p = scratch.p
-    R = scratch.R
-    e_w = scratch.e_w  # the baseline's evaluation above is done with it
-    orientation_error(R_des, R, scratch.work33, e_w)
-    e_p0 = p_des[0] - p[0]
-    e_p1 = p_des[1] - p[1]
-    e_p2 = p_des[2] - p[2]
-    tip_error = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
-    ori_error = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
-    voi, _, _, _ = voi_of_configuration(q, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT, work.points,
-                                        work.lens, work.dr)
-    view_fraction = view_fraction_at(p, gamma, prm.cone)
-    metrics = out.metrics
-    metrics[i, METRIC_VOI] = voi
-    metrics[i, METRIC_TIP_ERROR] = tip_error
-    metrics[i, METRIC_ORIENTATION_ERROR] = ori_error
-    metrics[i, METRIC_VIEW_FRACTION] = view_fraction
-    o = out.obs[i]
+
+
+@kernel(inline="always")
+def occlusion_observation(o, i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
+                          base_cmd):
+    """Row i's observation into o (layout: ``occlusion_observe``) from the joints q, gamma, the tip position error
+    (e_p0, e_p1, e_p2) and orientation error e_w, the view fraction, the VOI and the cached baseline command."""
+    dof = q.shape[0]
+    control_dt = env.control_dt
     for j in range(n):
         o[j] = (0.5 * math.pi - q[2 * j]) / env.max_bend
         o[n + 2 * j] = math.sin(q[2 * j + 1])
@@ -237,31 +215,52 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
-def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work):
-    """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
+def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
+    """Geometry at the state of row i: next baseline command (cached), observation and metrics.
 
-    ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
-    observe) and at the new state on exit.
+    Observation layout for n segments (see the env docstring): bends (n), sin/cos delta (2n),
+    insertion, sin/cos gamma, tip position / orientation errors, desired velocity, view fraction,
+    VOI, baseline command (dof + 1), elapsed time.
     """
-    ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
-        work.cmd
-    p_des, v_des = work.p_des, work.v_des
-    # Arrays of the bundles that the substep loop reads are taken into locals once: each read of a
-    # bundle's array is an atomic reference count in a kernel that calls another (see mbcr_kernels).
-    tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
-    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
-    rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
-    G = state.gamma
-    dof = state.q.shape[1]
-    dt = env.control_dt / env.substeps
     q = state.q[i]
-    clamped = 0
-    rate_saturated = 0
-    gamma_saturated = 0
-    guarded = 0
-    base_frozen = out.base_info[i, BASE_FROZEN]
-    base_saturated = out.base_info[i, BASE_SATURATED]
+    gamma = state.gamma[i]
+    n = robot.lengths.shape[0]
+    control_dt = env.control_dt
+    sub_dt = control_dt / env.substeps
+    t = state.steps[i] * control_dt
+    scratch = work.scratch
+    # The step's scratch: the substeps that used it are done (no allocation per observation)
+    p_des = work.p_des
+    v_des = work.v_des
+    desired_point(tasks, i, t, p_des, v_des)
+    R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+    cache_base_command(i, q, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, True, out)
     base_cmd = out.base_cmd
+    p = scratch.p
+    R = scratch.R
+    e_w = scratch.e_w  # the baseline's evaluation above is done with it
+    orientation_error(R_des, R, scratch.work33, e_w)
+    e_p0 = p_des[0] - p[0]
+    e_p1 = p_des[1] - p[1]
+    e_p2 = p_des[2] - p[2]
+    tip_error = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
+    ori_error = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
+    voi, _, _, _ = voi_of_configuration(q, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT, work.points,
+                                        work.lens, work.dr)
+    view_fraction = view_fraction_at(p, gamma, prm.cone)
+    metrics = out.metrics
+    metrics[i, METRIC_VOI] = voi
+    metrics[i, METRIC_TIP_ERROR] = tip_error
+    metrics[i, METRIC_ORIENTATION_ERROR] = ori_error
+    metrics[i, METRIC_VIEW_FRACTION] = view_fraction
+    occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
+                          base_cmd)
+
+
+@kernel(inline="always")
+def residual_rates(i, actions, env, rate_scale_vec, dof, residual):
+    """Row i's residual: its joint rates into ``residual``; returns (|a|^2, the endoscope's residual rate,
+    whether the joint residual is projected into the tip Jacobian's null space)."""
     action_sq = 0.0
     for k in range(dof + 1):
         action_sq += actions[i, k] * actions[i, k]
@@ -275,69 +274,91 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, w
     # solution are +0.0, and r - (+0.0) is r, signed zeros included), so a zero residual skips it and the
     # tip Jacobian it would need: ~10 % of a step of the baseline alone (zero actions, evaluations).
     project = env.has_base and env.nullspace and joint_residual
-    for s in range(env.substeps):
-        t = state.steps[i] * env.control_dt + s * dt
-        if s == 0:
-            for k in range(dof):
-                qdot[k] = base_cmd[i, k]
-            gd = base_cmd[i, dof]
-            if project:
-                tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
-        elif env.has_base and custom is not None:
-            desired_point(tasks, i, t, p_des, v_des)
-            R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
-            occlusion_slot_rates(custom, q, G[i], p_des, R_des, v_des, dt, robot, prm.cone, work.full_cmd)
-            for k in range(dof):
-                qdot[k] = work.full_cmd[k]
-            gd = work.full_cmd[dof]
-            if project:
-                tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
-        elif env.has_base:
-            desired_point(tasks, i, t, p_des, v_des)
-            R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
-            gd, frozen, base_scale = occlusion_rates_kernel(q, G[i], p_des, R_des, v_des, dt, robot, prm, ws,
-                                                            scratch, qdot)
-            base_frozen |= frozen
-            if base_scale < 1.0:
-                base_saturated = 1
-        else:
-            for k in range(dof):
-                qdot[k] = 0.0
-            gd = 0.0
+    return action_sq, gamma_residual, project
+
+
+@kernel(inline="always")
+def substep_base_rates(i, s, t, dt, qc, gamma, tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen,
+                       base_saturated, ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J):
+    """The baseline's joint rates of substep s at the controller's joints qc into qdot (the cached command
+    for s == 0), and the tip Jacobian at qc where the residual is projected.
+
+    Returns (the baseline's endoscope rate, base_frozen, base_saturated), the two ORed with this substep's.
+    """
+    dof = qdot.shape[0]
+    if s == 0:
+        for k in range(dof):
+            qdot[k] = base_cmd[i, k]
+        gd = base_cmd[i, dof]
         if project:
-            project_nullspace(tip_J, residual, work, projected)
-        else:
-            for k in range(dof):
-                projected[k] = residual[k]
-        # Uniform scaling keeps the command's direction; a baseline command already at its limit
-        # (within rounding) is left exactly as it is, so a zero residual reproduces the baseline.
-        scale = 1.0
+            tip_kernel(qc, robot, ws, tip_p, tip_R, tip_J)
+    elif env.has_base and custom is not None:
+        desired_point(tasks, i, t, p_des, v_des)
+        R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
+        occlusion_slot_rates(custom, qc, gamma, p_des, R_des, v_des, dt, robot, prm.cone, work.full_cmd)
         for k in range(dof):
-            cmd[k] = qdot[k] + projected[k]
-            if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
-                scale = rate_limit[k] / abs(cmd[k])
-        if scale < 1.0:
-            rate_saturated = 1
+            qdot[k] = work.full_cmd[k]
+        gd = work.full_cmd[dof]
+        if project:
+            tip_kernel(qc, robot, ws, tip_p, tip_R, tip_J)
+    elif env.has_base:
+        desired_point(tasks, i, t, p_des, v_des)
+        R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
+        gd, frozen, base_scale = occlusion_rates_kernel(qc, gamma, p_des, R_des, v_des, dt, robot, prm, ws,
+                                                        scratch, qdot)
+        base_frozen |= frozen
+        if base_scale < 1.0:
+            base_saturated = 1
+    else:
         for k in range(dof):
-            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
-            if hit:
-                clamped |= 1 << k
-        if env.visibility_guard > 0.0 and gamma_residual != 0.0:
-            tip_kernel(q, robot, ws, tip_p, tip_R, tip_J)
-            g_rate, hit = guard_gamma_rate(tip_p, G[i], gd, gamma_residual, dt, env.visibility_guard, prm.cone)
-            if hit:
-                guarded = 1
-        else:
-            g_rate = gd + gamma_residual
-        if g_rate > env.gamma_rate_limit:
-            g_rate = env.gamma_rate_limit
-            gamma_saturated = 1
-        elif g_rate < -env.gamma_rate_limit:
-            g_rate = -env.gamma_rate_limit
-            gamma_saturated = 1
-        G[i] = wrap_angle(G[i] + g_rate * dt)
-    state.steps[i] += 1
-    occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+            qdot[k] = 0.0
+        gd = 0.0
+    return gd, base_frozen, base_saturated
+
+
+@kernel(inline="always")
+def joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd):
+    """cmd = the baseline's joint rates qdot + the residual (projected where ``project``); returns the
+    uniform scale (<= 1) that brings cmd within the rate limits."""
+    dof = qdot.shape[0]
+    if project:
+        project_nullspace(tip_J, residual, work, projected)
+    else:
+        for k in range(dof):
+            projected[k] = residual[k]
+    # Uniform scaling keeps the command's direction; a baseline command already at its limit
+    # (within rounding) is left exactly as it is, so a zero residual reproduces the baseline.
+    scale = 1.0
+    for k in range(dof):
+        cmd[k] = qdot[k] + projected[k]
+        if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+            scale = rate_limit[k] / abs(cmd[k])
+    return scale
+
+
+@kernel(inline="always")
+def guard_on(env, gamma_residual):
+    """Whether the visibility guard checks this step's endoscope rate."""
+    return env.visibility_guard > 0.0 and gamma_residual != 0.0
+
+
+@kernel(inline="always")
+def endoscope_rate(qg, gamma, gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R, tip_J):
+    """The endoscope's rate: baseline + residual, guarded at the joints qg (where ``guard_on``), clipped to the
+    rate limit. Returns (rate, guarded, clipped)."""
+    if guard_on(env, gamma_residual):
+        tip_kernel(qg, robot, ws, tip_p, tip_R, tip_J)
+        g_rate, guarded = guard_gamma_rate(tip_p, gamma, gd, gamma_residual, dt, env.visibility_guard, prm.cone)
+    else:
+        g_rate, guarded = gd + gamma_residual, False
+    g_rate, clipped = clamp(g_rate, -env.gamma_rate_limit, env.gamma_rate_limit)
+    return g_rate, guarded, clipped
+
+
+@kernel(inline="always")
+def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
+                         base_frozen, base_saturated, guarded):
+    """Row i's reward terms, reward and flags after its observation."""
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
@@ -362,6 +383,59 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, w
     for k in range(N_TERMS_REWARD):
         total += terms[i, k]
     out.rewards[i] = total
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work):
+    """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
+
+    ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
+    observe) and at the new state on exit. The row's parts are shared with ``occlusion_mismatch`` and
+    inlined here.
+    """
+    ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
+        work.cmd
+    p_des, v_des = work.p_des, work.v_des
+    # Arrays of the bundles that the substep loop reads are taken into locals once: each read of a
+    # bundle's array is an atomic reference count in a kernel that calls another (see mbcr_kernels).
+    tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
+    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
+    rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
+    G = state.gamma
+    dof = state.q.shape[1]
+    dt = env.control_dt / env.substeps
+    q = state.q[i]
+    clamped = 0
+    rate_saturated = 0
+    gamma_saturated = 0
+    guarded = 0
+    base_frozen = out.base_info[i, BASE_FROZEN]
+    base_saturated = out.base_info[i, BASE_SATURATED]
+    base_cmd = out.base_cmd
+    action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
+    for s in range(env.substeps):
+        t = state.steps[i] * env.control_dt + s * dt
+        gd, base_frozen, base_saturated = substep_base_rates(
+            i, s, t, dt, q, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen, base_saturated,
+            ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J)
+        scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
+        if scale < 1.0:
+            rate_saturated = 1
+        for k in range(dof):
+            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
+            if hit:
+                clamped |= 1 << k
+        g_rate, hit, clipped = endoscope_rate(q, G[i], gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R,
+                                              tip_J)
+        if hit:
+            guarded = 1
+        if clipped:
+            gamma_saturated = 1
+        G[i] = wrap_angle(G[i] + g_rate * dt)
+    state.steps[i] += 1
+    occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+    finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
+                         base_frozen, base_saturated, guarded)
 
 
 @kernel(nogil=True)

@@ -26,36 +26,27 @@ from collections import namedtuple
 
 import numpy as np
 
-from continuum_gym.baselines.occlusion_kernels import occlusion_rates_kernel, wrap_angle
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, clip_observation, desired_point, desired_rotation
-from continuum_gym.envs.custom import occlusion_slot_rates
+from continuum_gym.baselines.occlusion_kernels import wrap_angle
+from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, desired_point, desired_rotation
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.occlusion_kernel import (
     BASE_FROZEN,
     BASE_SATURATED,
-    FLAG_BASE_FROZEN,
-    FLAG_BASE_SATURATED,
-    FLAG_CLAMPED,
-    FLAG_GAMMA_SATURATED,
-    FLAG_GUARDED,
-    FLAG_RATE_SATURATED,
-    FLAG_TERMINATED,
-    FLAG_TRUNCATED,
-    MAX_TIP_ERROR,
     METRIC_ORIENTATION_ERROR,
     METRIC_TIP_ERROR,
     METRIC_VIEW_FRACTION,
     METRIC_VOI,
-    N_TERMS_REWARD,
-    OBS_LIMIT,
-    ORIENTATION_ERROR_SCALE,
-    POSITION_ERROR_SCALE,
-    VELOCITY_SCALE,
     VOI_SAMPLES_PER_SEGMENT,
-    guard_gamma_rate,
+    cache_base_command,
+    endoscope_rate,
+    finish_occlusion_row,
+    guard_on,
+    joint_command,
     make_step_work,
-    project_nullspace,
+    occlusion_observation,
+    residual_rates,
+    substep_base_rates,
     view_fraction_at,
 )
 from continuum_gym.envs.row_claims import first_rows, next_rows
@@ -127,27 +118,8 @@ def mismatch_observe(i, state, tasks, robot, true_robot, prm, true_cone, env, cu
     v_des = work.v_des
     desired_point(tasks, i, t, p_des, v_des)
     R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
-    qdot = work.qdot
+    cache_base_command(i, qm, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, False, out)
     base_cmd = out.base_cmd
-    if env.has_base and custom is not None:
-        occlusion_slot_rates(custom, qm, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, work.full_cmd)
-        for k in range(dof + 1):
-            base_cmd[i, k] = work.full_cmd[k]
-        out.base_info[i, BASE_FROZEN] = 0
-        out.base_info[i, BASE_SATURATED] = 0
-    elif env.has_base:
-        gd, frozen, scale = occlusion_rates_kernel(qm, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
-                                                   work.ws, scratch, qdot)
-        for k in range(dof):
-            base_cmd[i, k] = qdot[k]
-        base_cmd[i, dof] = gd
-        out.base_info[i, BASE_FROZEN] = frozen
-        out.base_info[i, BASE_SATURATED] = 1 if scale < 1.0 else 0
-    else:
-        for k in range(dof + 1):
-            base_cmd[i, k] = 0.0
-        out.base_info[i, BASE_FROZEN] = 0
-        out.base_info[i, BASE_SATURATED] = 0
     # the truth: metrics
     p, R = mw.p, mw.R
     tip_kernel(q, true_robot, work.ws, p, R, mw.J)
@@ -174,30 +146,8 @@ def mismatch_observe(i, state, tasks, robot, true_robot, prm, true_cone, env, cu
     orientation_error(R_des, mw.R_seen, scratch.work33, e_seen)
     voi_estimate, _, _, _ = voi_of_configuration(qm, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT,
                                                  work.points, work.lens, work.dr)
-    o = out.obs[i]
-    for j in range(n):
-        o[j] = (0.5 * math.pi - qm[2 * j]) / env.max_bend
-        o[n + 2 * j] = math.sin(qm[2 * j + 1])
-        o[n + 1 + 2 * j] = math.cos(qm[2 * j + 1])
-    ins = 2 * n
-    at = 3 * n
-    span = env.upper[ins] - env.lower[ins]
-    o[at] = 2.0 * (qm[ins] - env.lower[ins]) / span - 1.0 if math.isfinite(span) else qm[ins] / 0.02
-    o[at + 1] = math.sin(gamma)
-    o[at + 2] = math.cos(gamma)
-    o[at + 3] = (p_des[0] - ps[0]) / POSITION_ERROR_SCALE
-    o[at + 4] = (p_des[1] - ps[1]) / POSITION_ERROR_SCALE
-    o[at + 5] = (p_des[2] - ps[2]) / POSITION_ERROR_SCALE
-    for a in range(3):
-        o[at + 6 + a] = e_seen[a] / ORIENTATION_ERROR_SCALE
-        o[at + 9 + a] = v_des[a] / VELOCITY_SCALE
-    o[at + 12] = view_fraction
-    o[at + 13] = voi_estimate
-    rate_scale_vec = env.rate_scale_vec
-    for k in range(dof + 1):
-        o[at + 14 + k] = base_cmd[i, k] / rate_scale_vec[k]
-    o[at + 15 + dof] = t / (tasks.duration[i] * control_dt)
-    clip_observation(o, OBS_LIMIT)
+    occlusion_observation(out.obs[i], i, n, qm, gamma, p_des[0] - ps[0], p_des[1] - ps[1], p_des[2] - ps[2], e_seen,
+                          v_des, view_fraction, voi_estimate, t, tasks, env, base_cmd)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
@@ -226,75 +176,27 @@ def mismatch_step_row(i, state, actions, tasks, robot, true_robot, prm, true_con
     base_frozen = out.base_info[i, BASE_FROZEN]
     base_saturated = out.base_info[i, BASE_SATURATED]
     base_cmd = out.base_cmd
-    action_sq = 0.0
-    for k in range(dof + 1):
-        action_sq += actions[i, k] * actions[i, k]
-    joint_residual = False
-    for k in range(dof):
-        residual[k] = actions[i, k] * env.residual_scale * rate_scale_vec[k]
-        if residual[k] != 0.0:
-            joint_residual = True
-    gamma_residual = actions[i, dof] * env.residual_scale * rate_scale_vec[dof]
-    project = env.has_base and env.nullspace and joint_residual
+    action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
     for s in range(substeps):
         t = state.steps[i] * env.control_dt + s * dt
-        if s == 0:
-            for k in range(dof):
-                qdot[k] = base_cmd[i, k]
-            gd = base_cmd[i, dof]
-            if project:
-                tip_kernel(qm, robot, ws, tip_p, tip_R, tip_J)
-        else:
+        if s > 0:  # the first substep's measurement is the observation's
             measure(me, i, state.steps[i] * substeps + s, dof - 1)
-            if env.has_base and custom is not None:
-                desired_point(tasks, i, t, p_des, v_des)
-                R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
-                occlusion_slot_rates(custom, qm, G[i], p_des, R_des, v_des, dt, robot, prm.cone, work.full_cmd)
-                for k in range(dof):
-                    qdot[k] = work.full_cmd[k]
-                gd = work.full_cmd[dof]
-                if project:
-                    tip_kernel(qm, robot, ws, tip_p, tip_R, tip_J)
-            elif env.has_base:
-                desired_point(tasks, i, t, p_des, v_des)
-                R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
-                gd, frozen, base_scale = occlusion_rates_kernel(qm, G[i], p_des, R_des, v_des, dt, robot, prm, ws,
-                                                                scratch, qdot)
-                base_frozen |= frozen
-                if base_scale < 1.0:
-                    base_saturated = 1
-            else:
-                for k in range(dof):
-                    qdot[k] = 0.0
-                gd = 0.0
-        if project:
-            project_nullspace(tip_J, residual, work, projected)
-        else:
-            for k in range(dof):
-                projected[k] = residual[k]
-        scale = 1.0
-        for k in range(dof):
-            cmd[k] = qdot[k] + projected[k]
-            if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
-                scale = rate_limit[k] / abs(cmd[k])
+        gd, base_frozen, base_saturated = substep_base_rates(
+            i, s, t, dt, qm, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen,
+            base_saturated, ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J)
+        scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
         if scale < 1.0:
             rate_saturated = 1
         for k in range(dof):
             u[k] = scale * cmd[k]
-        if env.visibility_guard > 0.0 and gamma_residual != 0.0:  # the guard predicts with the nominal model
+        if guard_on(env, gamma_residual):  # the guard predicts with the nominal model
             for k in range(dof):
                 q_pred[k], _ = clamp(qm[k] + u[k] * dt, lower[k], upper[k])
-            tip_kernel(q_pred, robot, ws, tip_p, tip_R, tip_J)
-            g_rate, hit = guard_gamma_rate(tip_p, G[i], gd, gamma_residual, dt, env.visibility_guard, prm.cone)
-            if hit:
-                guarded = 1
-        else:
-            g_rate = gd + gamma_residual
-        if g_rate > env.gamma_rate_limit:
-            g_rate = env.gamma_rate_limit
-            gamma_saturated = 1
-        elif g_rate < -env.gamma_rate_limit:
-            g_rate = -env.gamma_rate_limit
+        g_rate, hit, clipped = endoscope_rate(q_pred, G[i], gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R,
+                                              tip_J)
+        if hit:
+            guarded = 1
+        if clipped:
             gamma_saturated = 1
         u[dof] = g_rate
         # the plant: delay, actuator lag, position limits, backlash of the bending angles
@@ -309,30 +211,8 @@ def mismatch_step_row(i, state, actions, tasks, robot, true_robot, prm, true_con
         G[i] = wrap_angle(G[i] + rate[dof] * dt)
     state.steps[i] += 1
     mismatch_observe(i, state, tasks, robot, true_robot, prm, true_cone, env, custom, work, mw, me, out)
-    metrics = out.metrics
-    terms = out.terms
-    weights = env.weights
-    voi = metrics[i, METRIC_VOI]
-    over = metrics[i, METRIC_VIEW_FRACTION] - env.visibility_fraction
-    terms[i, 0] = -weights[0] * voi
-    terms[i, 1] = -weights[1] * metrics[i, METRIC_TIP_ERROR] / 0.001
-    terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR] / 0.01
-    terms[i, 3] = -weights[3] * (over / (1.0 - env.visibility_fraction) if over > 0.0 else 0.0)
-    terms[i, 4] = -weights[4] * action_sq / (dof + 1)
-    flags = out.flags
-    tip_error = metrics[i, METRIC_TIP_ERROR]
-    flags[i, FLAG_CLAMPED] = clamped
-    flags[i, FLAG_RATE_SATURATED] = rate_saturated
-    flags[i, FLAG_GAMMA_SATURATED] = gamma_saturated
-    flags[i, FLAG_TERMINATED] = 1 if (tip_error > MAX_TIP_ERROR or not math.isfinite(tip_error)) else 0
-    flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
-    flags[i, FLAG_BASE_FROZEN] = base_frozen
-    flags[i, FLAG_BASE_SATURATED] = base_saturated
-    flags[i, FLAG_GUARDED] = guarded
-    total = 0.0
-    for k in range(N_TERMS_REWARD):
-        total += terms[i, k]
-    out.rewards[i] = total
+    finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
+                         base_frozen, base_saturated, guarded)
 
 
 @kernel(nogil=True)

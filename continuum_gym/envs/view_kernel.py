@@ -67,42 +67,11 @@ ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "d
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
 
-@kernel(borrows=True, no_cpython_wrapper=True, inline="always")
-def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
-    """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
-
-    ``work`` is a ``ViewStepWork``: the step that calls this is done with its arrays (no allocation per row).
-    """
-    q = state.q[i]
+@kernel(inline="always")
+def view_observation(o, i, t, q, p_tgt, p_tip, e_w, ratio, q_dv, tasks, prm, dv, env, base_cmd):
+    """Row i's observation into o: joints q, target point p_tgt's offset from the tip's p_tip, orientation
+    error e_w, overlap ratio, the cached baseline command, time (and the da Vinci's q_dv with observe_target)."""
     control_dt = env.control_dt
-    t = state.steps[i] * control_dt
-    scratch, q_dv, p_dv, R_dv, p_tgt, qdot = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt, \
-        work.base_rates
-    desired_point(tasks, i, t, q_dv, work.dv_rate)
-    davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
-    base_cmd = out.base_cmd
-    if env.has_base and custom is not None:
-        view_slot_rates(custom, q, p_tgt, R_dv, control_dt, robot, qdot)
-        eps_p, eps_r = view_errors(q, p_tgt, R_dv, robot, scratch)
-        for k in range(6):
-            base_cmd[i, k] = qdot[k]
-    elif env.has_base:
-        eps_p, eps_r, _ = view_rates_kernel(q, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
-        for k in range(6):
-            base_cmd[i, k] = qdot[k]
-    else:
-        eps_p, eps_r = view_errors(q, p_tgt, R_dv, robot, scratch)
-        for k in range(6):
-            base_cmd[i, k] = 0.0
-    p_ct = scratch.p_ct
-    e_w = scratch.e_w
-    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near,
-                                 frustum.far, work.overlap)
-    metrics = out.metrics
-    metrics[i, METRIC_OR] = ratio
-    metrics[i, METRIC_POSITION_ERROR] = eps_p
-    metrics[i, METRIC_ORIENTATION_ERROR] = eps_r
-    o = out.obs[i]
     lower, upper, action_scale = prm.lower, prm.upper, env.action_scale
     o[0] = 2.0 * (q[0] - lower[0]) / (upper[0] - lower[0]) - 1.0
     o[1] = q[1] / math.pi
@@ -113,7 +82,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
     o[6] = math.sin(q[5])
     o[7] = math.cos(q[5])
     for a in range(3):
-        o[8 + a] = (p_tgt[a] - p_ct[a]) / POSITION_ERROR_SCALE
+        o[8 + a] = (p_tgt[a] - p_tip[a]) / POSITION_ERROR_SCALE
         o[11 + a] = e_w[a]
     o[14] = ratio
     for k in range(6):
@@ -126,6 +95,58 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
         o[25] = math.sin(q_dv[3])
         o[26] = math.cos(q_dv[3])
     clip_observation(o, OBS_LIMIT)
+
+
+@kernel(inline="always")
+def target_and_base_command(i, qc, t, tasks, robot, prm, dv, env, custom, work, errors, base_cmd):
+    """Row i's da Vinci target at time t (work.q_dv, p_dv, R_dv, p_tgt) and the baseline's joint rates at the
+    controller's joints qc, cached into base_cmd[i]. With ``errors``: returns the pose errors (eps_p, eps_r)
+    at qc, its camera pose left in work.scratch; else (0, 0)."""
+    control_dt = env.control_dt
+    scratch, q_dv, p_dv, R_dv, p_tgt, qdot = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt, \
+        work.base_rates
+    desired_point(tasks, i, t, q_dv, work.dv_rate)
+    davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
+    eps_p, eps_r = 0.0, 0.0
+    if env.has_base and custom is not None:
+        view_slot_rates(custom, qc, p_tgt, R_dv, control_dt, robot, qdot)
+        if errors:
+            eps_p, eps_r = view_errors(qc, p_tgt, R_dv, robot, scratch)
+        for k in range(6):
+            base_cmd[i, k] = qdot[k]
+    elif env.has_base:
+        eps_p, eps_r, _ = view_rates_kernel(qc, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
+        for k in range(6):
+            base_cmd[i, k] = qdot[k]
+    else:
+        if errors:
+            eps_p, eps_r = view_errors(qc, p_tgt, R_dv, robot, scratch)
+        for k in range(6):
+            base_cmd[i, k] = 0.0
+    return eps_p, eps_r
+
+
+@kernel(borrows=True, no_cpython_wrapper=True, inline="always")
+def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
+    """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
+
+    ``work`` is a ``ViewStepWork``: the step that calls this is done with its arrays (no allocation per row).
+    """
+    q = state.q[i]
+    control_dt = env.control_dt
+    t = state.steps[i] * control_dt
+    scratch, q_dv, p_dv, R_dv, p_tgt = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt
+    base_cmd = out.base_cmd
+    eps_p, eps_r = target_and_base_command(i, q, t, tasks, robot, prm, dv, env, custom, work, True, base_cmd)
+    p_ct = scratch.p_ct
+    e_w = scratch.e_w
+    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near,
+                                 frustum.far, work.overlap)
+    metrics = out.metrics
+    metrics[i, METRIC_OR] = ratio
+    metrics[i, METRIC_POSITION_ERROR] = eps_p
+    metrics[i, METRIC_ORIENTATION_ERROR] = eps_r
+    view_observation(out.obs[i], i, t, q, p_tgt, p_ct, e_w, ratio, q_dv, tasks, prm, dv, env, base_cmd)
 
 
 @kernel
@@ -159,25 +180,17 @@ def target_residual_rates(i, q, t, actions, tasks, robot, prm, dv, env, custom, 
         view_rates_kernel(q, p_tgt, R_goal, env.control_dt, robot, prm, work.scratch, cmd)
 
 
-# The row's parts and its observation are inlined into view_step_rows, their only caller: a call passes
-# every array of the bundles as flattened arguments, a sizeable cost against a row of ~3 us. The observation
-# is inlined at one place, for resets and steps alike, and DR IK stays a call: inlined as well it makes the
-# step no faster and the first compile much longer.
 @kernel(inline="always")
-def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out, work):
-    """Row i's control step up to its observation: one IK step of dt = control_dt (the paper's 0.01 s).
-
-    Returns (|a|^2, clamped joint bits, rate scale) for ``finish_view_row``.
-    """
-    cmd, q_new = work.cmd, work.q_new
-    q = state.q[i]
-    base_cmd = out.base_cmd
+def view_command(i, qc, state, actions, tasks, robot, prm, dv, env, custom, base_cmd, work, cmd):
+    """Row i's joint rates into cmd: the baseline's (cached, or at the controller's joints qc for a target
+    residual) with the residual, scaled uniformly within the rate limits. Returns (|a|^2, rate scale)."""
     control_dt = env.control_dt
     action_sq = 0.0
     for k in range(6):
         action_sq += actions[i, k] * actions[i, k]
     if env.target_space and action_sq > 0.0:
-        target_residual_rates(i, q, state.steps[i] * control_dt, actions, tasks, robot, prm, dv, env, custom, work, cmd)
+        target_residual_rates(i, qc, state.steps[i] * control_dt, actions, tasks, robot, prm, dv, env, custom, work,
+                              cmd)
     elif env.target_space:  # a zero target residual is the baseline's cached command, bit for bit
         for k in range(6):
             cmd[k] = base_cmd[i, k]
@@ -193,6 +206,25 @@ def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out,
     if scale < 1.0:
         for k in range(6):
             cmd[k] *= scale
+    return action_sq, scale
+
+
+# The row's parts and its observation are inlined into view_step_rows, their only caller (the command and
+# the observation's layout into the model-mismatch rows too): a call passes every array of the bundles as
+# flattened arguments, a sizeable cost against a row of ~3 us. The observation is inlined at one place, for
+# resets and steps alike, and DR IK stays a call: inlined as well it makes the step no faster and the first
+# compile much longer.
+@kernel(inline="always")
+def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out, work):
+    """Row i's control step up to its observation: one IK step of dt = control_dt (the paper's 0.01 s).
+
+    Returns (|a|^2, clamped joint bits, rate scale) for ``finish_view_row``.
+    """
+    cmd, q_new = work.cmd, work.q_new
+    q = state.q[i]
+    base_cmd = out.base_cmd
+    control_dt = env.control_dt
+    action_sq, scale = view_command(i, q, state, actions, tasks, robot, prm, dv, env, custom, base_cmd, work, cmd)
     clamped = integrate_view_step(q, cmd, control_dt, prm.lower, prm.upper, q_new)
     for k in range(6):
         q[k] = q_new[k]

@@ -21,9 +21,8 @@ from collections import namedtuple
 
 import numpy as np
 
-from continuum_gym.baselines.view_tracking import integrate_view_step, view_rates_kernel
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
-from continuum_gym.envs.custom import view_slot_rates
+from continuum_gym.baselines.view_tracking import integrate_view_step
+from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.row_claims import first_rows, next_rows
@@ -31,16 +30,14 @@ from continuum_gym.envs.view_kernel import (
     METRIC_OR,
     METRIC_ORIENTATION_ERROR,
     METRIC_POSITION_ERROR,
-    OBS_DIM,
-    OBS_LIMIT,
-    POSITION_ERROR_SCALE,
     finish_view_row,
     make_view_step_work,
-    target_residual_rates,
+    target_and_base_command,
+    view_command,
+    view_observation,
 )
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
-from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.endoscope_kernels import EndoscopeKernelArgs, endoscope_kinematics
 from continuum_gym.robots.rotations import orientation_error, rotation_exp
 
@@ -65,22 +62,9 @@ def view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, 
     counter = state.steps[i]
     measure(me, i, counter, 0)
     t = state.steps[i] * control_dt
-    scratch, q_dv, p_dv, R_dv, p_tgt, qdot = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt, \
-        work.base_rates
-    desired_point(tasks, i, t, q_dv, work.dv_rate)
-    davinci_pose(q_dv, dv, True, p_dv, R_dv, p_tgt)
+    scratch, q_dv, p_dv, R_dv, p_tgt = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt
     base_cmd = out.base_cmd
-    if env.has_base and custom is not None:
-        view_slot_rates(custom, qm, p_tgt, R_dv, control_dt, robot, qdot)
-        for k in range(6):
-            base_cmd[i, k] = qdot[k]
-    elif env.has_base:
-        view_rates_kernel(qm, p_tgt, R_dv, control_dt, robot, prm, scratch, qdot)
-        for k in range(6):
-            base_cmd[i, k] = qdot[k]
-    else:
-        for k in range(6):
-            base_cmd[i, k] = 0.0
+    target_and_base_command(i, qm, t, tasks, robot, prm, dv, env, custom, work, False, base_cmd)
     # the truth: the tracked body (true kinematics), then the camera on its true mounting
     p_cam, R_body, p_ct = mw.p_cam, mw.R_body, mw.p_ct
     endoscope_kinematics(q, true_robot, scratch.ws, p_cam, R_body, p_ct, mw.J, False)
@@ -128,30 +112,7 @@ def view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, 
     orientation_error(R_dv, R_body, scratch.work33, e_w)
     ratio_seen = ratio if exact_mount else overlap_ratio_inline(p_dv, R_dv, p_cam, R_body, frustum.tan_half,
                                                                 frustum.near, frustum.far, work.overlap)
-    o = out.obs[i]
-    lower, upper, action_scale = prm.lower, prm.upper, env.action_scale
-    o[0] = 2.0 * (qm[0] - lower[0]) / (upper[0] - lower[0]) - 1.0
-    o[1] = qm[1] / math.pi
-    o[2] = 2.0 * (qm[2] - lower[2]) / (upper[2] - lower[2]) - 1.0
-    o[3] = math.sin(qm[3])
-    o[4] = math.cos(qm[3])
-    o[5] = 2.0 * (qm[4] - lower[4]) / (upper[4] - lower[4]) - 1.0
-    o[6] = math.sin(qm[5])
-    o[7] = math.cos(qm[5])
-    for a in range(3):
-        o[8 + a] = (p_tgt[a] - p_seen[a]) / POSITION_ERROR_SCALE
-        o[11 + a] = e_w[a]
-    o[14] = ratio_seen
-    for k in range(6):
-        o[15 + k] = base_cmd[i, k] / action_scale[k]
-    o[21] = t / (tasks.duration[i] * control_dt)
-    if o.shape[0] > OBS_DIM:  # observe_target
-        o[22] = (min(max(q_dv[0], dv.lower[0]), dv.upper[0]) - 0.05) / 0.05
-        o[23] = min(max(q_dv[1], dv.lower[1]), dv.upper[1]) / (math.pi / 3)
-        o[24] = min(max(q_dv[2], dv.lower[2]), dv.upper[2]) / (math.pi / 3)
-        o[25] = math.sin(q_dv[3])
-        o[26] = math.cos(q_dv[3])
-    clip_observation(o, OBS_LIMIT)
+    view_observation(out.obs[i], i, t, qm, p_tgt, p_seen, e_w, ratio_seen, q_dv, tasks, prm, dv, env, base_cmd)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
@@ -163,27 +124,7 @@ def advance_view_mismatch(i, state, actions, tasks, robot, prm, dv, env, custom,
     qm = me.q_meas[i]
     base_cmd = out.base_cmd
     control_dt = env.control_dt
-    action_sq = 0.0
-    for k in range(6):
-        action_sq += actions[i, k] * actions[i, k]
-    if env.target_space and action_sq > 0.0:
-        target_residual_rates(i, qm, state.steps[i] * control_dt, actions, tasks, robot, prm, dv, env, custom, work,
-                              cmd)
-    elif env.target_space:
-        for k in range(6):
-            cmd[k] = base_cmd[i, k]
-    else:
-        action_scale = env.action_scale
-        for k in range(6):
-            cmd[k] = base_cmd[i, k] + actions[i, k] * env.residual_scale * action_scale[k]
-    scale = 1.0
-    rate_limit = env.rate_limit
-    for k in range(6):
-        if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
-            scale = rate_limit[k] / abs(cmd[k])
-    if scale < 1.0:
-        for k in range(6):
-            cmd[k] *= scale
+    action_sq, scale = view_command(i, qm, state, actions, tasks, robot, prm, dv, env, custom, base_cmd, work, cmd)
     u = mw.u
     for k in range(6):
         u[k] = cmd[k]
@@ -207,22 +148,30 @@ def view_mismatch_batch(state, actions, active, tasks, robot, prm, dv, frustum, 
     mw = make_view_mismatch_work()
     first, last = first_rows(claims, start, stop)
     while first < last:
-        for i in range(first, last):
-            mode = active[i]
-            if mode == 0:
-                continue
-            true_robot = EndoscopeKernelArgs(robot.L1 * me.scale[i, 0], robot.Lm, robot.L2 * me.scale[i, 1],
-                                             robot.Lc, robot.Le)
-            step = mode != OBSERVE_ONLY
-            action_sq, clamped, scale = 0.0, 0, 1.0
-            if step:
-                action_sq, clamped, scale = advance_view_mismatch(i, state, actions, tasks, robot, prm, dv, env,
-                                                                  custom, out, work, mw, me)
-            view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, env, custom, work, mw, me,
-                                  out)
-            if step:
-                finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
+        view_mismatch_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, me, work, mw,
+                           first, last)
         first, last = next_rows(claims, start, stop, first, last)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def view_mismatch_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, me, work, mw, start,
+                       stop):
+    """``view_mismatch_batch``'s loop on a given work, as ``view_step_rows``: rows [start, stop) of the true
+    endoscopes (segment lengths scaled)."""
+    for i in range(start, stop):
+        mode = active[i]
+        if mode == 0:
+            continue
+        true_robot = EndoscopeKernelArgs(robot.L1 * me.scale[i, 0], robot.Lm, robot.L2 * me.scale[i, 1], robot.Lc,
+                                         robot.Le)
+        step = mode != OBSERVE_ONLY
+        action_sq, clamped, scale = 0.0, 0, 1.0
+        if step:
+            action_sq, clamped, scale = advance_view_mismatch(i, state, actions, tasks, robot, prm, dv, env, custom,
+                                                              out, work, mw, me)
+        view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, env, custom, work, mw, me, out)
+        if step:
+            finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
 
 
 __all__ = ["view_mismatch_batch"]
