@@ -23,11 +23,11 @@ import numpy as np
 
 from continuum_gym.baselines.view_tracking import integrate_view_step, view_rates_kernel
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
-from continuum_gym.envs.custom import view_slot_rates
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.row_claims import first_rows, next_rows
-from continuum_gym.envs.view_kernel import (
+from continuum_gym.envs.view_tracking.controller import view_slot_rates
+from continuum_gym.envs.view_tracking.kernel import (
     METRIC_OR,
     METRIC_ORIENTATION_ERROR,
     METRIC_POSITION_ERROR,

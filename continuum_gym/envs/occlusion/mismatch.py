@@ -28,10 +28,10 @@ import numpy as np
 
 from continuum_gym.baselines.occlusion_kernels import occlusion_rates_kernel, wrap_angle
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, clip_observation, desired_point, desired_rotation
-from continuum_gym.envs.custom import occlusion_slot_rates
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
-from continuum_gym.envs.occlusion_kernel import (
+from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
+from continuum_gym.envs.occlusion.kernel import (
     BASE_FROZEN,
     BASE_SATURATED,
     FLAG_BASE_FROZEN,
