@@ -108,6 +108,12 @@ def load_known() -> None:
     load_entry_points()
 
 
+def load_object(reference: str) -> Any:
+    """The object a ``"module:name"`` reference names, its module imported now."""
+    module, _, name = reference.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
 def split_reference(value: str) -> tuple[str | None, str]:
     """``"my_lab.plugins:dls"`` -> ``("my_lab.plugins", "dls")``; a plain name -> ``(None, name)``."""
     if ":" not in value:
@@ -141,5 +147,5 @@ def reference(name: str, origin: str | None) -> str:
     return f"{origin}:{name}" if origin else name
 
 
-__all__ = ["ENV_VAR", "ENTRY_POINT_GROUP", "caller_origin", "remember", "import_modules", "load_entry_points",
+__all__ = ["load_object", "ENV_VAR", "ENTRY_POINT_GROUP", "caller_origin", "remember", "import_modules", "load_entry_points",
            "load_known", "split_reference", "lookup", "reference"]

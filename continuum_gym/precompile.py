@@ -72,16 +72,14 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     (after :data:`_PROGRESS`) for the parent, whose one progress bar counts the steps of every worker.
     """
     import gymnasium as gym
-    import numpy as np
 
     import continuum_gym  # noqa: F401  (registers the ids)
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.geometry import overlap_ratio
+    from continuum_gym.plugins import load_object as load
 
     spec = get_spec(env_id)
     config = spec.config_class
-    # test_only_tasks, builtin_tasks: ClassVars of each concrete config class, not declared on EnvConfig
-    test_only, builtin = config.test_only_tasks, config.builtin_tasks  # type: ignore[attr-defined]
+    test_only, builtin = config.test_only_tasks, config.builtin_tasks
     work = [{"task": task, "task_split": "test" if task in test_only else "train", "base_controller": base}
             for base in (*spec.baselines, None) for task in builtin]
     report(f"total {len(work) + 3}")  # the single envs, two vector envs, the library
@@ -91,11 +89,8 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     for num_threads in (1, 2):
         _step_twice(gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads))
         report("done")
-    for part in LIBRARY_WARM_UPS.get(env_id, ()):
-        part()
-    if env_id == _env_ids()[-1]:  # the overlap ratio's public entry points, once
-        overlap_ratio(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))  # one pair, then a batch
-        overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
+    for part in spec.warm_ups:  # the env's library API, as ``continuum-gym reproduce`` calls it
+        load(part)()
     report("done")
 
 
@@ -106,29 +101,6 @@ def _step_twice(env) -> None:
     for _ in range(2):
         env.step(env.action_space.sample())
     env.close()
-
-
-def _occlusion_library() -> None:
-    """The robot's and the baselines' batched Python API, as ``continuum-gym reproduce`` calls them."""
-    from continuum_gym.evaluation.reproduction import circle_part, hold_part
-    from continuum_gym.robots import MultiBackboneRobot
-
-    robot = MultiBackboneRobot()
-    hold_part(robot, 2, 0)
-    circle_part(robot)
-
-
-def _view_library() -> None:
-    from continuum_gym.evaluation.reproduction import case_part, coverage_part
-    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
-
-    endoscope, davinci = ContinuumEndoscope(), DaVinciEndoscope()
-    coverage_part(endoscope, davinci, 3)
-    case_part(endoscope, davinci)
-
-
-LIBRARY_WARM_UPS = {"ContinuumGym/OcclusionAvoidance-v0": (_occlusion_library,),
-                    "ContinuumGym/ViewTracking-v0": (_view_library,)}
 
 
 def _env_ids() -> list:

@@ -42,7 +42,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from continuum_gym import plugins
-from continuum_gym.envs.ids import OCCLUSION, VIEW
 from continuum_gym.envs.registered import (
     CONTROLLERS,
     ORIGINS,
@@ -67,10 +66,11 @@ if TYPE_CHECKING:
 _NAME_HINT = "a non-empty string of letters, digits, '_' or '-'"
 
 
-def _env(env: str) -> str:
-    from continuum_gym.envs.spec import get_spec
+def _env(env: str | None) -> str:
+    """The env id a registration is for; None: the library's first environment (OcclusionAvoidance)."""
+    from continuum_gym.envs.spec import ENV_SPECS, get_spec
 
-    return get_spec(env).env_id
+    return next(iter(ENV_SPECS)) if env is None else get_spec(env).env_id
 
 
 def _name(name: Any, taken: Collection[str], what: str, replace: bool) -> str:
@@ -86,19 +86,19 @@ def register_robot(name: str, robot: MultiBackboneRobot | ContinuumEndoscope, *,
 
     A ``MultiBackboneRobot`` serves OcclusionAvoidance, a ``ContinuumEndoscope`` ViewTracking.
     """
-    from continuum_gym.robots import ContinuumEndoscope, MultiBackboneRobot
+    from continuum_gym.envs.spec import ENV_SPECS
+    from continuum_gym.plugins import load_object as load
 
-    if isinstance(robot, MultiBackboneRobot):
-        env = OCCLUSION
-    elif isinstance(robot, ContinuumEndoscope):
-        env = VIEW
-    else:
-        raise ValueError(f"robot must be a MultiBackboneRobot or a ContinuumEndoscope; got {describe(robot)}")
+    kinds = {spec.env_id: load(spec.robot_class) for spec in ENV_SPECS.values() if spec.robot_class}
+    env = next((env_id for env_id, kind in kinds.items() if isinstance(robot, kind)), None)
+    if env is None:
+        names = " or ".join(sorted({f"a {kind.__name__}" for kind in kinds.values()}))
+        raise ValueError(f"robot must be {names}; got {describe(robot)}")
     ROBOTS[env][_name(name, ROBOTS[env], "registered robot", replace)] = robot
     record("robot", env, name, plugins.caller_origin())
 
 
-def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: int | None = None,
+def register_task(name: str, sampler: Callable, *, env: str | None = None, count: int | None = None,
                   replace: bool = False) -> None:
     """A family of tasks, one instance per task id and split: ``sampler(task_id, split, rng)``.
 
@@ -111,7 +111,7 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
     """
     from continuum_gym.envs.spec import get_spec
     from continuum_gym.envs.task_sources import SampledTasks
-    from continuum_gym.envs.trajectories import DaVinciTrajectory, TipTrajectory
+    from continuum_gym.plugins import load_object as load
 
     env = _env(env)
     if name in get_spec(env).config_class.builtin_tasks:  # type: ignore[attr-defined]  # ClassVar of each config
@@ -120,14 +120,14 @@ def register_task(name: str, sampler: Callable, *, env: str = OCCLUSION, count: 
         raise ValueError(f"sampler must be callable as sampler(task_id, split, rng); got {describe(sampler)}")
     if count is not None:
         count = int(number(count, "count (task instances)", low=1))
-    kind = TipTrajectory if env == OCCLUSION else DaVinciTrajectory
+    kind = load(get_spec(env).config_class.trajectory_class)
     source = SampledTasks(_name(name, TASKS[env], "registered task", replace), sampler, kind, count)
     source.draw("train", 0)  # fails now, naming the problem, rather than at the first reset
     TASKS[env][name] = source
     record("task", env, name, plugins.caller_origin())
 
 
-def register_controller(name: str, rates: Callable[..., None], *, env: str = OCCLUSION, params: Sequence[float] = (),
+def register_controller(name: str, rates: Callable[..., None], *, env: str | None = None, params: Sequence[float] = (),
                         doc: str = "", replace: bool = False) -> CustomController:
     """A compiled rate function as the residual base: ``gym.make(env, base_controller=name)``.
 
@@ -144,14 +144,16 @@ def register_controller(name: str, rates: Callable[..., None], *, env: str = OCC
     values = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
     if not np.all(np.isfinite(values)):
         raise ValueError(f"params must be finite numbers; got {describe(values)}")
-    controller = CustomController(name, env, rates, values, doc)
+    if not get_spec(env).controller_module:
+        raise ValueError(f"{env} takes no registered controllers (its EnvSpec names no controller_module)")
+    controller = CustomController(name, env, rates, values, doc, get_spec(env).controller_module)
     check_controller(controller)
     CONTROLLERS[env][name] = controller
     record("controller", env, name, plugins.caller_origin())
     return controller
 
 
-def register_reward_term(name: str, fn: Callable[..., Any], *, env: str = OCCLUSION, weight: float = 1.0,
+def register_reward_term(name: str, fn: Callable[..., Any], *, env: str | None = None, weight: float = 1.0,
                          compiled: bool = True, params: Sequence[float] = (), replace: bool = False) -> RewardTerm:
     """A named reward term, added (times ``weight``) to the reward of every env of ``env`` made afterwards.
 
@@ -180,7 +182,7 @@ def register_reward_term(name: str, fn: Callable[..., Any], *, env: str = OCCLUS
     return term
 
 
-def unregister(name: str, env: str = OCCLUSION) -> None:
+def unregister(name: str, env: str | None = None) -> None:
     """Remove a registered robot, task, controller or reward term of ``env`` by name."""
     env = _env(env)
     for table in (ROBOTS, TASKS, CONTROLLERS, REWARD_TERMS):
@@ -195,4 +197,10 @@ def unregister(name: str, env: str = OCCLUSION) -> None:
 
 __all__ = ["register_robot", "register_task", "register_controller", "register_reward_term", "unregister",
            "origin_of", "reference_of", "resolve", "robot_names", "controller_names", "CustomController", "RewardTerm",
-           "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS", "ORIGINS", "OCCLUSION", "VIEW"]
+           "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS", "ORIGINS"]
+
+
+def __getattr__(name: str):
+    from continuum_gym.envs.moved import moved
+
+    return moved(__name__, name)

@@ -17,7 +17,8 @@ import pytest
 
 import continuum_gym  # noqa: F401  (registers the ids)
 from continuum_gym.cli import main
-from continuum_gym.envs.config import OcclusionConfig, ViewTrackingConfig
+from continuum_gym.envs.occlusion.config import OcclusionConfig
+from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
 
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
 VIEW = "ContinuumGym/ViewTracking-v0"

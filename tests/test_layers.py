@@ -134,8 +134,69 @@ def test_the_layers_below_the_environments_need_no_rl_framework(layer):
 def test_the_checks_see_what_they_look_for(tmp_path):
     """The graph is built from real import statements: a known downward edge and a known function-level one."""
     graph = _graph()
-    assert graph.has_edge("continuum_gym.envs.occlusion_kernel", "continuum_gym.envs.custom")
+    assert graph.has_edge("continuum_gym.envs.occlusion.kernel", "continuum_gym.envs.occlusion.controller")
     assert graph.has_edge("continuum_gym.envs.registered", "continuum_gym.plugins")
     # a function-level import (inside CustomController.predict) is an edge too
     assert graph.has_edge("continuum_gym.envs.registered", "continuum_gym.envs.custom")
     assert _layer("continuum_gym.envs.spec") == 4 and _layer("continuum_gym.agents.train") == 6
+
+
+#: The environments' own packages: everything specific to one environment lives in one of them.
+ENV_PACKAGES = ("continuum_gym.envs.occlusion", "continuum_gym.envs.view_tracking")
+#: Modules outside them that may name one environment's modules, and why.
+ENV_NAMING = {
+    "continuum_gym.envs.registration": "BUILTIN_ENVS lists the library's environment packages",
+    "continuum_gym.envs.moved": "re-exports the names that moved into the packages, for users' old imports",
+    "continuum_gym.envs": "re-exports the environments' classes (continuum_gym.envs.OcclusionConfig, ...)",
+    "continuum_gym.envs.occlusion_kernel": "the old import path of the kernel's column names (docs, users)",
+    "continuum_gym.envs.view_kernel": "the old import path of the kernel's column names (docs, users)",
+    # one environment's own pieces in the layers above the environments, each named by its spec
+    # (scene, optimum, warm_ups) or by its module name
+    "continuum_gym.render.occlusion_scene": "the OcclusionAvoidance scene (spec.scene)",
+    "continuum_gym.render.view_scene": "the ViewTracking scene (spec.scene)",
+    "continuum_gym.evaluation.optimum.occlusion": "the OcclusionAvoidance optimum (spec.optimum)",
+    "continuum_gym.evaluation.residual_reach": "ViewTracking's residual reach study",
+}
+
+
+def _strings(tree: ast.AST) -> list[tuple[str, int]]:
+    """String constants that are not docstrings."""
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                  and node.body and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
+    return [(node.value, node.lineno) for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings]
+
+
+def _outside_the_env_packages():
+    return {name: path for name, path in MODULES.items()
+            if not any(name == p or name.startswith(p + ".") for p in ENV_PACKAGES)}
+
+
+def test_no_environment_id_outside_its_package():
+    """The rest of the library reaches an environment through its spec: no module names an id."""
+    found = [f"{name}:{line} {value!r}" for name, path in _outside_the_env_packages().items()
+             for value, line in _strings(ast.parse(path.read_text())) if "ContinuumGym/" in value]
+    assert found == []
+
+
+def test_only_the_listed_modules_import_an_environment_package():
+    found = []
+    for name, path in _outside_the_env_packages().items():
+        for target, names, line in _imports(name, path):
+            if any(target == p or target.startswith(p + ".") for p in ENV_PACKAGES) and name not in ENV_NAMING:
+                found.append(f"{name}:{line} imports {target}")
+        for value, line in _strings(ast.parse(path.read_text())):
+            if any(p in value for p in ENV_PACKAGES) and name not in ENV_NAMING:
+                found.append(f"{name}:{line} names {value!r}")
+    assert found == []
+
+
+def test_the_environment_checks_see_what_they_look_for():
+    """They read string constants and imports: an id in code is seen, one in a docstring is not."""
+    code = ast.parse('"""ContinuumGym/Doc-v0"""\nX = "ContinuumGym/Code-v0"\n')
+    assert [value for value, _ in _strings(code)] == ["ContinuumGym/Code-v0"]
+    inside = [name for name in MODULES if name.startswith(ENV_PACKAGES[0] + ".")]
+    assert {"continuum_gym.envs.occlusion.spec", "continuum_gym.envs.occlusion.core"} <= set(inside)
+    assert any("ContinuumGym/" in value for value, _ in _strings(ast.parse(MODULES[
+        "continuum_gym.envs.occlusion.spec"].read_text())))

@@ -16,7 +16,7 @@ from scipy.interpolate import CubicSpline
 
 import continuum_gym  # noqa: F401  (registers the ids)
 from continuum_gym.envs import ContinuumSB3VecEnv, DaVinciTrajectory, TipTrajectory
-from continuum_gym.envs.occlusion_kernel import (
+from continuum_gym.envs.occlusion.kernel import (
     FLAG_TERMINATED,
     METRIC_TIP_ERROR,
     METRIC_VOI,

@@ -11,11 +11,12 @@ from continuum_gym.envs.registration import ENV_IDS, register_envs
 register_envs()
 
 _EXPORTS = {
-    "OcclusionConfig": "config", "ViewTrackingConfig": "config", "EnvConfig": "config",
-    "ENV_SPECS": "spec", "EnvSpec": "spec", "get_spec": "spec",
+    "OcclusionConfig": "occlusion.config", "ViewTrackingConfig": "view_tracking.config", "EnvConfig": "config",
+    "ENV_SPECS": "spec", "EnvSpec": "spec", "get_spec": "spec", "register_env": "registration",
     "TipTrajectory": "trajectories", "DaVinciTrajectory": "trajectories",
-    "OcclusionAvoidanceEnv": "occlusion", "OcclusionAvoidanceVectorEnv": "occlusion", "OcclusionCore": "occlusion",
-    "ViewTrackingEnv": "view_tracking", "ViewTrackingVectorEnv": "view_tracking", "ViewTrackingCore": "view_tracking",
+    "OcclusionAvoidanceEnv": "occlusion.core", "OcclusionAvoidanceVectorEnv": "occlusion.core",
+    "OcclusionCore": "occlusion.core", "ViewTrackingEnv": "view_tracking.core",
+    "ViewTrackingVectorEnv": "view_tracking.core", "ViewTrackingCore": "view_tracking.core",
     "ContinuumSB3VecEnv": "sb3", "NamedRewardTerms": "vector", "ModelError": "model_error",
 }
 __all__ = ["ENV_IDS", "register_envs", *sorted(_EXPORTS)]

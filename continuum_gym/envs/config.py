@@ -1,6 +1,7 @@
-"""Typed, frozen configurations of the environments: built and validated in one place.
+"""Typed, frozen configurations of the environments: what they share, built and validated in one place.
 
-``OcclusionConfig`` and ``ViewTrackingConfig`` hold everything that defines an environment: robot,
+Each environment's config (``OcclusionConfig`` in ``envs/occlusion/config.py``, ``ViewTrackingConfig`` in
+``envs/view_tracking/config.py``) subclasses ``EnvConfig`` and holds everything that defines it: robot,
 endoscope (cone / da Vinci), limits, task, baseline, residual, reward weights and timing. Users keep
 passing the flat keyword arguments of ``gym.make(id, **kwargs)`` (and rl-zoo's ``env_kwargs``); the
 env builds its config from them with ``from_kwargs``, which validates every value once and says which
@@ -19,11 +20,9 @@ from dataclasses import dataclass, field, fields
 from typing import Any, ClassVar
 
 from continuum_gym.validation import (
-    boolean,
     choice,
     closest,
     describe,
-    fraction,
     integer,
     number,
     weights,
@@ -38,12 +37,6 @@ class UnknownArgumentError(TypeError, ValueError):
     """
 
 
-#: Task families of each environment (the papers' fixed tasks exist only in the test split).
-OCCLUSION_TASKS = ("hold", "circle", "random", "mixed")
-OCCLUSION_TEST_ONLY = ("circle",)
-VIEW_TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
-VIEW_TEST_ONLY = ("case1", "case2", "coverage")
-
 #: Largest control step (s): every task lasts at least 1.5 s, so an episode has at least 15 steps.
 MAX_CONTROL_DT = 0.1
 MAX_SUBSTEPS = 1000
@@ -51,8 +44,6 @@ MAX_RESIDUAL_SCALE = 10.0
 #: Reward weights are scale factors of terms of order 1; beyond this the reward overflows to inf.
 MAX_REWARD_WEIGHT = 1e6
 MAX_GRID = 401
-#: Keywords whose objects (robot, cone, da Vinci endoscope) may also be given as ``to_dict()`` writes them.
-OBJECT_KEYWORDS = ("robot", "cone", "davinci", "model_error")
 
 
 def spec(unit: str = "", doc: str = "", type_name: str = "") -> dict:
@@ -68,14 +59,14 @@ def _default(f: dataclasses.Field) -> Any:
     return None
 
 
-def _model_error_field() -> Any:
+def model_error_field() -> Any:
     """The ``model_error`` keyword of every env (one definition; a dataclass field cannot be shared)."""
     return field(default="none", metadata=spec(
         doc="the true robot's difference from the model the controller uses: `none`, `mild`, `severe` (presets) or "
             "a `ModelError` (docs/model-error.md)", type_name="str or ModelError"))
 
 
-def _randomize_field() -> Any:
+def randomize_field() -> Any:
     """The ``randomize_model_error`` keyword of every env."""
     return field(default=False, metadata=spec(
         doc="draw a new model error per episode within the preset's ranges (else fixed per split and task id)",
@@ -91,6 +82,14 @@ class EnvConfig:
     baselines: ClassVar[tuple] = ()
     #: Keyword arguments accepted for backward compatibility that must stay at None here.
     foreign_keywords: ClassVar[tuple] = ()
+    #: Keywords whose objects (robot, endoscope, model error) may also be given as ``to_dict()`` writes them.
+    object_keywords: ClassVar[tuple] = ("robot", "model_error")
+    #: The trajectory class of the env's tasks (``TipTrajectory`` / ``DaVinciTrajectory``), as "module:Class".
+    trajectory_class: ClassVar[str] = ""
+    default_weights: ClassVar[dict] = {}  #: the built-in reward terms' default weights
+    residual_spaces: ClassVar[tuple] = ()  #: the values of ``residual_space``
+    builtin_tasks: ClassVar[tuple] = ()  #: the built-in task families
+    test_only_tasks: ClassVar[tuple] = ()  #: ... of which these are fixed evaluation tasks (test split only)
 
     @classmethod
     def keyword_names(cls) -> tuple:
@@ -108,7 +107,7 @@ class EnvConfig:
             elif key not in names:
                 raise UnknownArgumentError(f"{cls.env_id} got an unexpected keyword argument {key!r}"
                                            f"{closest(key, names)}; valid arguments: {sorted(names)}")
-            elif key in OBJECT_KEYWORDS and isinstance(kwargs[key], dict) and "type" in kwargs[key]:
+            elif key in cls.object_keywords and isinstance(kwargs[key], dict) and "type" in kwargs[key]:
                 kwargs[key] = cls._build_object(key, dict(kwargs[key]))  # as config.yml writes it
         return cls(**kwargs)
 
@@ -220,13 +219,13 @@ class EnvConfig:
         for f in fields(cls):
             meta = f.metadata
             default = _default(f)
-            shown = "paper's" if default is None and f.name in ("robot", "cone", "davinci") else repr(default)
+            shown = "paper's" if default is None and f.name in cls.object_keywords else repr(default)
             rows.append(f"| `{f.name}` | {meta.get('type') or f.type} | `{shown}` | {meta.get('unit', '') or '-'} | "
                         f"{meta.get('doc', '')} |")
         return "\n".join(rows)
 
 
-def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
+def check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
     from continuum_gym.envs import registered
     from continuum_gym.envs.task_sources import resolve_task
 
@@ -238,7 +237,7 @@ def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
         from continuum_gym import plugins
 
         plugins.load_known()  # a task family of a plug-in module that this process has not imported yet
-    source = resolve_task(config.task, config.env_id, tasks, config.env_id == OcclusionConfig.env_id)
+    source = resolve_task(config.task, config)
     set_(config, "_task_source", source)
     choice(config.task_split, TASK_SPLITS, "task_split")
     if source.test_only and config.task_split != "test":
@@ -259,193 +258,7 @@ def _check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
         set_(config, "max_episode_steps", integer(config.max_episode_steps, "max_episode_steps", low=1, high=10**9))
 
 
-@dataclass(frozen=True)
-class OcclusionConfig(EnvConfig):
-    """Configuration of ``ContinuumGym/OcclusionAvoidance-v0`` (SI units)."""
-
-    env_id: ClassVar[str] = "ContinuumGym/OcclusionAvoidance-v0"
-    #: The analytic controllers a residual can be built on (the env spec lists them from here).
-    baselines: ClassVar[tuple] = ("minimum_norm", "projected_gradient")
-    default_weights: ClassVar[dict] = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0,
-                                       "action": 0.01}
-    residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
-    builtin_tasks: ClassVar[tuple] = OCCLUSION_TASKS
-    test_only_tasks: ClassVar[tuple] = OCCLUSION_TEST_ONLY
-
-    task: Any = field(default="hold", metadata=spec(
-        doc="`hold` (hold a paper-like start pose), `random` (smooth random tip trajectories, <= 12 mm), `mixed` "
-            "(even task ids hold, odd ids random), `circle` (the paper's task b; test split only), a registered "
-            "family's name, or recorded data: a `TipTrajectory` or a list of them", type_name="str or TipTrajectory(s)"))
-    task_split: str = field(default="train", metadata=spec(
-        doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
-    base_controller: str | None = field(default="projected_gradient", metadata=spec(
-        doc="residual base: `projected_gradient`, `minimum_norm`, or `None` (pure RL)", type_name="str or None"))
-    residual_scale: float = field(default=0.3, metadata=spec(
-        unit="fraction of the rate limits", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
-    residual_space: str = field(default="nullspace", metadata=spec(
-        doc="`nullspace` (projected into the tip Jacobian's null space at every substep) or `joint`",
-        type_name="str"))
-    reward_weights: dict = field(default_factory=dict, metadata=spec(
-        doc="weights of the terms `voi`, `tip_position`, `tip_orientation`, `visibility`, `action` (defaults 1, "
-            "0.05, 0.05, 10, 0.01; each in [0, 1e6])", type_name="dict"))
-    visibility_guard: float | None = field(default=0.69, metadata=spec(
-        unit="fraction of the cone half-angle", doc="the residual's endoscope rotation is cut where it would carry "
-        "the tip beyond this angle from the view axis (in (0, 1); `None`: off)", type_name="float or None"))
-    control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
-                                                          type_name="float"))
-    substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
-                                                        "loop at the default)", type_name="int"))
-    max_bend: float = field(default=math.pi / 2, metadata=spec(
-        unit="rad", doc="per-segment bend limit, two-sided |pi/2 - theta_j| <= max_bend (in (0, pi])",
-        type_name="float"))
-    insertion: tuple = field(default=(0.0, 0.04), metadata=spec(unit="m", doc="(min, max) insertion q_ins, within "
-                                                                "[0, 0.2]", type_name="(float, float)"))
-    bend_rate: float = field(default=3.0, metadata=spec(unit="rad/s", doc="|theta_dot| limit", type_name="float"))
-    plane_rate: float = field(default=6.0, metadata=spec(unit="rad/s", doc="|delta_dot| limit", type_name="float"))
-    insertion_rate: float = field(default=0.02, metadata=spec(unit="m/s", doc="|q_ins_dot| limit",
-                                                              type_name="float"))
-    gamma_rate: float = field(default=3.0, metadata=spec(unit="rad/s", doc="|gamma_dot| limit (endoscope rotation)",
-                                                         type_name="float"))
-    lens_model: str | None = field(default=None, metadata=spec(
-        doc="`literal` or `physical` reading of the lens origin (paper-notes §1.3 item 7); `None`: the cone's "
-            "(literal for the paper's)", type_name="str or None"))
-    max_episode_steps: int | None = field(default=None, metadata=spec(
-        doc="cap on the episode length in steps (`None`: the task's own duration)", type_name="int or None"))
-    robot: Any = field(default=None, metadata=spec(
-        doc="a `MultiBackboneRobot` (1-4 segments, any lengths and stiffness) or a registered robot's name; `None`: "
-            "the paper's 3 segments", type_name="MultiBackboneRobot, str or None"))
-    cone: Any = field(default=None, metadata=spec(
-        doc="a `LensCone` (channel offset d_o, lens tilt alpha, half-angle beta, lens model); `None`: the paper's",
-        type_name="LensCone or None"))
-    model_error: Any = _model_error_field()
-    randomize_model_error: bool = _randomize_field()
-
-    def __post_init__(self) -> None:
-        from continuum_gym.baselines.occlusion import OcclusionLimits
-        from continuum_gym.geometry.lens_cone import LensCone
-        from continuum_gym.robots import MultiBackboneRobot
-
-        set_ = object.__setattr__
-        set_(self, "robot", _resolve_robot(self.robot, MultiBackboneRobot, self.env_id))
-        if self.cone is not None and not isinstance(self.cone, LensCone):
-            raise ValueError(f"cone must be a LensCone or None; got {describe(self.cone)}")
-        if self.lens_model is not None:
-            choice(self.lens_model, ("literal", "physical"), "lens_model")
-            if self.cone is not None and self.cone.lens_model != self.lens_model:
-                raise ValueError(f"lens_model={self.lens_model!r} contradicts cone.lens_model="
-                                 f"{self.cone.lens_model!r}: give one of them")
-        if self.cone is None:
-            set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
-        set_(self, "lens_model", self.cone.lens_model)
-        _check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
-        _check_model_error(self, "occlusion", self.robot.n_segments)
-        choice(self.residual_space, self.residual_spaces, "residual_space")
-        if self.visibility_guard is not None:
-            if isinstance(self.visibility_guard, str):
-                raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "
-                                 f"or None; got {self.visibility_guard!r}")
-            set_(self, "visibility_guard", fraction(self.visibility_guard, "visibility_guard", allow_one=False))
-        limits = OcclusionLimits(max_bend=self.max_bend, insertion=self.insertion, bend_rate=self.bend_rate,
-                                 plane_rate=self.plane_rate, insertion_rate=self.insertion_rate,
-                                 gamma_rate=self.gamma_rate)
-        for name in ("max_bend", "insertion", "bend_rate", "plane_rate", "insertion_rate", "gamma_rate"):
-            set_(self, name, getattr(limits, name))
-
-    @property
-    def limits(self):
-        """The ``OcclusionLimits`` these fields define."""
-        from continuum_gym.baselines.occlusion import OcclusionLimits
-
-        return OcclusionLimits(max_bend=self.max_bend, insertion=self.insertion, bend_rate=self.bend_rate,
-                               plane_rate=self.plane_rate, insertion_rate=self.insertion_rate,
-                               gamma_rate=self.gamma_rate)
-
-
-@dataclass(frozen=True)
-class ViewTrackingConfig(EnvConfig):
-    """Configuration of ``ContinuumGym/ViewTracking-v0`` (SI units)."""
-
-    env_id: ClassVar[str] = "ContinuumGym/ViewTracking-v0"
-    baselines: ClassVar[tuple] = ("resolved_rate", "dimension_reduced")
-    foreign_keywords: ClassVar[tuple] = ("max_bend", "lens_model")
-    default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
-                                       "overlap_bonus": 0.0}
-    residual_spaces: ClassVar[tuple] = ("joint", "target")
-    builtin_tasks: ClassVar[tuple] = VIEW_TASKS
-    test_only_tasks: ClassVar[tuple] = VIEW_TEST_ONLY
-
-    task: Any = field(default="random", metadata=spec(
-        doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "
-            "map's distribution off its grid), the paper's `case1`, `case2`, `coverage` (test split only), a "
-            "registered family's name, or recorded data: a `DaVinciTrajectory` or a list of them",
-        type_name="str or DaVinciTrajectory(s)"))
-    task_split: str = field(default="train", metadata=spec(
-        doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
-    base_controller: str | None = field(default="dimension_reduced", metadata=spec(
-        doc="residual base: `dimension_reduced`, `resolved_rate`, or `None` (pure RL)", type_name="str or None"))
-    residual_scale: float = field(default=0.3, metadata=spec(
-        unit="fraction of the action scale", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
-    residual_space: str = field(default="joint", metadata=spec(
-        doc="`joint` (added to the baseline's joint rates) or `target` (moves the target the baseline's IK "
-            "tracks)", type_name="str"))
-    reward_weights: dict = field(default_factory=dict, metadata=spec(
-        doc="weights of `overlap`, `position`, `orientation`, `action`, `overlap_bonus` (defaults 1, 0.1, 0.1, "
-            "0.01, 0; each in [0, 1e6])", type_name="dict"))
-    control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step = the IK step (in (0, 0.1])",
-                                                          type_name="float"))
-    substeps: int = field(default=1, metadata=spec(doc="must be 1: the paper's IK step is the control step",
-                                                   type_name="int"))
-    rate_limits: tuple | None = field(default=None, metadata=spec(
-        unit="m/s, rad/s", doc="6 joint-rate limits (`None`: the paper has none)", type_name="6 floats or None"))
-    grid: int = field(default=21, metadata=spec(doc="coverage grid points per axis (in [2, 401])", type_name="int"))
-    max_episode_steps: int | None = field(default=None, metadata=spec(
-        doc="cap on the episode length in steps (`None`: the task's own duration)", type_name="int or None"))
-    observe_target: bool = field(default=False, metadata=spec(
-        doc="append the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll] to the observation",
-        type_name="bool"))
-    robot: Any = field(default=None, metadata=spec(
-        doc="a `ContinuumEndoscope` (lengths, joint limits) or a registered robot's name; `None`: the paper's",
-        type_name="ContinuumEndoscope, str or None"))
-    davinci: Any = field(default=None, metadata=spec(
-        doc="a `DaVinciEndoscope` (viewing angle alpha, view distance Le); `None`: the paper's 30-degree one",
-        type_name="DaVinciEndoscope or None"))
-    model_error: Any = _model_error_field()
-    randomize_model_error: bool = _randomize_field()
-
-    def __post_init__(self) -> None:
-        from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
-
-        set_ = object.__setattr__
-        set_(self, "robot", _resolve_robot(self.robot, ContinuumEndoscope, self.env_id))
-        if self.davinci is None:
-            set_(self, "davinci", DaVinciEndoscope())
-        elif not isinstance(self.davinci, DaVinciEndoscope):
-            raise ValueError(f"davinci must be a DaVinciEndoscope or None; got {describe(self.davinci)}")
-        _check_common(self, VIEW_TASKS, VIEW_TEST_ONLY)
-        _check_model_error(self, "view", 2)
-        choice(self.residual_space, self.residual_spaces, "residual_space")
-        if self.residual_space == "target" and self.base_controller is None:
-            raise ValueError("residual_space='target' moves the baseline's target: it needs a base_controller")
-        if self.substeps != 1:
-            raise ValueError(f"substeps must be 1 for ViewTracking (the paper's IK step is the control step); "
-                             f"got {self.substeps!r}")
-        if self.rate_limits is not None:
-            try:
-                values = tuple(self.rate_limits)
-            except TypeError:
-                values = ()
-            if len(values) != 6:
-                raise ValueError("rate_limits must be 6 positive joint-rate limits (m/s for L0, rad/s) or None; got "
-                                 f"{describe(self.rate_limits)}")
-            set_(self, "rate_limits", tuple(
-                math.inf if v == math.inf else number(v, f"rate_limits[{k}]", low=0.0, low_open=True,
-                                                      unit="m/s or rad/s (inf: unlimited)")
-                for k, v in enumerate(values)))
-        set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
-        set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
-
-
-def _check_model_error(config: EnvConfig, env: str, n_segments: int) -> None:
+def check_model_error(config: EnvConfig, env: str, n_segments: int) -> None:
     from continuum_gym.envs.model_error import check_randomize, resolve_model_error
 
     object.__setattr__(config, "model_error", resolve_model_error(config.model_error, env, n_segments))
@@ -453,7 +266,7 @@ def _check_model_error(config: EnvConfig, env: str, n_segments: int) -> None:
                                                                           config.model_error))
 
 
-def _resolve_robot(robot: Any, kind: type, env_id: str):
+def resolve_robot(robot: Any, kind: type, env_id: str):
     """A robot instance from an instance, a registered name (or ``"module:name"``) or None (the paper's)."""
     from continuum_gym.envs import registered
 
@@ -509,4 +322,11 @@ def _config_from_pickle(cls: type, kwargs: dict, modules: list) -> EnvConfig:
     return cls.from_kwargs(**kwargs)
 
 
-__all__ = ["UnknownArgumentError", "EnvConfig", "OcclusionConfig", "ViewTrackingConfig", "TASK_SPLITS", "OCCLUSION_TASKS", "VIEW_TASKS"]
+__all__ = ["UnknownArgumentError", "EnvConfig", "TASK_SPLITS", "spec", "model_error_field", "randomize_field",
+           "check_common", "check_model_error", "resolve_robot"]
+
+
+def __getattr__(name: str):
+    from continuum_gym.envs.moved import moved
+
+    return moved(__name__, name)

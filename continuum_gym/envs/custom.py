@@ -13,7 +13,7 @@ from collections import namedtuple
 from collections.abc import Sequence
 
 import numpy as np
-from numba import typeof, types
+from numba import types
 from numba.core.registry import CPUDispatcher
 from numba.typed import List
 
@@ -29,33 +29,21 @@ _F64 = types.float64[::1]
 _F64_2D = types.float64[:, ::1]
 _I64 = types.int64[::1]
 
-OCCLUSION_RATES_DOC = ("rates(q (dof,), gamma, p_des (3,), R_des (3, 3), v_des (3,), dt, robot, cone, params (m,), "
-                       "out (dof + 1,)) -> None")
-VIEW_RATES_DOC = "rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,), out (6,)) -> None"
 TERM_DOC = ("term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,), params (m,)) -> float64 "
             "(or, without rates, term(metrics, flags, action, params))")
 
 
-def _paper_args(env_id: str):
-    from continuum_gym.envs.ids import OCCLUSION
+def controller_module(controller):
+    """The module through which a registered controller is compiled, checked and called.
 
-    if env_id == OCCLUSION:
-        from continuum_gym.geometry.lens_cone import LensCone
-        from continuum_gym.robots import MultiBackboneRobot
+    Its env's spec names it (``EnvSpec.controller_module``, recorded on the controller at registration);
+    it defines ``RATES_DOC`` (the call convention of ``rates``), ``rates_signature()`` (its numba
+    signature), ``trial_rates(controller)`` (its command at the paper's home state) and
+    ``predict(controller, observation)``.
+    """
+    import importlib
 
-        return MultiBackboneRobot().kernel_args(), LensCone().kernel_args()
-    from continuum_gym.robots import ContinuumEndoscope
-
-    return ContinuumEndoscope().kernel_args(), None
-
-
-def rates_signature(env_id: str):
-    """The numba signature of an env's controller rate function."""
-    robot, cone = _paper_args(env_id)
-    if cone is not None:
-        return types.void(_F64, types.float64, _F64, _F64_2D, _F64, types.float64, typeof(robot), typeof(cone), _F64,
-                          _F64)
-    return types.void(_F64, _F64, _F64_2D, types.float64, typeof(robot), _F64, _F64)
+    return importlib.import_module(controller.module)
 
 
 def term_signature():
@@ -103,27 +91,9 @@ def _compiled(fn, signature, what: str, doc: str):
 
 def check_controller(controller) -> None:
     """Compile a registered controller for its env's signature and run it once on a paper-like state."""
-    from continuum_gym.envs.ids import OCCLUSION
-
-    occlusion = controller.env_id == OCCLUSION
-    doc = OCCLUSION_RATES_DOC if occlusion else VIEW_RATES_DOC
-    _compiled(controller.rates, rates_signature(controller.env_id), "rates", doc)
-    robot, cone = _paper_args(controller.env_id)
-    if occlusion:
-        from continuum_gym.robots import MultiBackboneRobot
-
-        q = MultiBackboneRobot().home
-        p, R = MultiBackboneRobot().forward_kinematics(q)
-        out = np.full(q.size + 1, np.nan)
-        controller.rates(q, 0.0, p, np.ascontiguousarray(R), np.zeros(3), 1e-3, robot, cone, controller.params, out)
-    else:
-        from continuum_gym.robots import ContinuumEndoscope
-
-        endoscope = ContinuumEndoscope()
-        q = endoscope.home
-        p, R = endoscope.target_pose(q)
-        out = np.full(6, np.nan)
-        controller.rates(q, p, np.ascontiguousarray(R), 0.01, robot, controller.params, out)
+    module = controller_module(controller)
+    _compiled(controller.rates, module.rates_signature(), "rates", module.RATES_DOC)
+    out = module.trial_rates(controller)
     if not np.all(np.isfinite(out)):
         raise ValueError(f"rates must write a finite command into every entry of out ({out.size}); at the paper's home "
                          f"configuration it wrote {out.tolist()}")
@@ -151,7 +121,7 @@ def controller_slot(env_id: str, controller=None) -> ControllerSlot | None:
     """
     if controller is None:
         return None
-    rates = List.empty_list(types.FunctionType(rates_signature(env_id)))
+    rates = List.empty_list(types.FunctionType(controller_module(controller).rates_signature()))
     rates.append(controller.rates)
     return ControllerSlot(rates, controller.params, True)
 
@@ -166,20 +136,6 @@ def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
         fns.append(term.call)
         params.append(np.ascontiguousarray(term.params, dtype=np.float64))
     return RewardSlot(fns, params, np.array(list(weights), dtype=np.float64))
-
-
-# The slots' typed lists need numba's reference counting, which the step kernels' rows run without
-# (``kernel(borrows=True)``): so the calls into a slot are kernels of their own, with it.
-@kernel
-def occlusion_slot_rates(custom, q, gamma, p_des, R_des, v_des, dt, robot, cone, out):
-    """The registered OcclusionAvoidance controller of slot ``custom``: its command (dof + 1,) into ``out``."""
-    custom.rates[0](q, gamma, p_des, R_des, v_des, dt, robot, cone, custom.params, out)
-
-
-@kernel
-def view_slot_rates(custom, q, p_target, R_target, dt, robot, out):
-    """The registered ViewTracking controller of slot ``custom``: its joint rates (6,) into ``out``."""
-    custom.rates[0](q, p_target, R_target, dt, robot, custom.params, out)
 
 
 @kernel
@@ -199,40 +155,7 @@ def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewa
 
 def controller_predict(controller, observation) -> np.ndarray:
     """A registered controller's command for a controller observation dict (as the built-in ``predict``)."""
-    from continuum_gym.envs.ids import OCCLUSION
-
     if not isinstance(observation, dict):
         raise ValueError(f"predict reads a dict observation (core.controller_observation(row)); got "
                          f"{describe(observation)}")
-    robot = observation.get("robot")
-    q = np.ascontiguousarray(observation["q"], dtype=np.float64)
-    dt = float(observation.get("dt", 1e-3 if controller.env_id == OCCLUSION else 0.01))
-    rows = q.reshape(-1, q.shape[-1])
-    if controller.env_id == OCCLUSION:
-        from continuum_gym.geometry.lens_cone import LensCone
-        from continuum_gym.robots import MultiBackboneRobot
-
-        robot = robot or MultiBackboneRobot()
-        if rows.shape[1] != robot.dof:
-            raise ValueError(f"observation['q'] has {rows.shape[1]} joints; the robot (observation['robot'], default the "
-                             f"paper's) has {robot.dof}")
-        cone = observation.get("cone") or LensCone()
-        out = np.empty((rows.shape[0], rows.shape[1] + 1))
-        args = [np.broadcast_to(np.asarray(observation[k], dtype=float), shape).reshape(-1, *shape[1:])
-                for k, shape in (("gamma", (rows.shape[0],)), ("p_des", (rows.shape[0], 3)),
-                                 ("R_des", (rows.shape[0], 3, 3)), ("v_des", (rows.shape[0], 3)))]
-        for i in range(rows.shape[0]):
-            controller.rates(rows[i], float(args[0][i]), np.ascontiguousarray(args[1][i]),
-                             np.ascontiguousarray(args[2][i]), np.ascontiguousarray(args[3][i]), dt,
-                             robot.kernel_args(), cone.kernel_args(), controller.params, out[i])
-    else:
-        from continuum_gym.robots import ContinuumEndoscope
-
-        robot = robot or ContinuumEndoscope()
-        out = np.empty((rows.shape[0], 6))
-        p = np.broadcast_to(np.asarray(observation["p_target"], dtype=float), (rows.shape[0], 3))
-        R = np.broadcast_to(np.asarray(observation["R_target"], dtype=float), (rows.shape[0], 3, 3))
-        for i in range(rows.shape[0]):
-            controller.rates(rows[i], np.ascontiguousarray(p[i]), np.ascontiguousarray(R[i]), dt, robot.kernel_args(),
-                             controller.params, out[i])
-    return out.reshape(q.shape[:-1] + (out.shape[-1],))
+    return controller_module(controller).predict(controller, observation)

@@ -25,19 +25,19 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from continuum_gym.validation import choice, fraction, positive
+from continuum_gym.validation import choice
 
 REWARD_TYPES = ("dense", "sparse")
 GOAL_DIM = 6  #: a pose: position (m, 3) and rotation vector (rad, 3)
 
 
-def _pose_goal(p: np.ndarray, R: np.ndarray) -> np.ndarray:
+def pose_goal(p: np.ndarray, R: np.ndarray) -> np.ndarray:
     from continuum_gym.robots import rotation_vector
 
     return np.concatenate([p, rotation_vector(R)]).astype(np.float64)
 
 
-def _split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "position (m), rotation vector (rad)"):
+def split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "position (m), rotation vector (rad)"):
     """(positions (..., 3), rotations (..., 3, 3), the goal array) of goals (..., size) that start with a pose."""
     from scipy.spatial.transform import Rotation
 
@@ -52,7 +52,7 @@ def _split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "posit
 class ContinuumGoalEnv(gym.Env):
     """A goal-conditioned front end of a ``ContinuumGym/`` env (subclasses set ``base_id``)."""
 
-    base_id: str = ""
+    base_id: str = ""  #: the id of the env this is the goal-conditioned front end of
     goal_dim: int = GOAL_DIM
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
@@ -106,63 +106,10 @@ class ContinuumGoalEnv(gym.Env):
         self.base.close()
 
 
-class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
-    __doc__ = __doc__
-    base_id = "ContinuumGym/OcclusionAvoidance-v0"
-    goal_dim = GOAL_DIM + 1  # the pose and the state's VOI
-
-    def __init__(self, reward_type: str = "dense", tolerance_m: float = 1e-3, tolerance_rad: float = 0.05,
-                 **kwargs: Any) -> None:
-        self.tolerance_m = positive(tolerance_m, "tolerance_m", "m")
-        self.tolerance_rad = positive(tolerance_rad, "tolerance_rad", "rad")
-        super().__init__(reward_type, **kwargs)
-
-    def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:
-        core = self.core
-        p, R = core.robot.forward_kinematics(np.ascontiguousarray(core.q[0]))
-        t = core.steps[0] * core.control_dt
-        p_des, _ = core.desired(0, t)
-        return (np.append(_pose_goal(p, R), float(info["voi"])),
-                np.append(_pose_goal(p_des, core.desired_rotation(0, t)), 0.0))
-
-    def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> np.ndarray:
-        """Reward of (achieved, desired) goal pairs of any leading shape (see the module docstring)."""
-        layout = "position (m), rotation vector (rad), VOI"
-        p_a, R_a, achieved = _split_goal(achieved_goal, "achieved_goal", self.goal_dim, layout)
-        p_d, R_d, _ = _split_goal(desired_goal, "desired_goal", self.goal_dim, layout)
-        position = np.linalg.norm(p_a - p_d, axis=-1)
-        relative = np.einsum("...ji,...jk->...ik", R_a, R_d)
-        orientation = np.arccos(np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0))
-        if self.reward_type == "sparse":
-            return -((position > self.tolerance_m) | (orientation > self.tolerance_rad)).astype(np.float64)
-        return -(1e3 * position + orientation + achieved[..., GOAL_DIM])
+__all__ = ["ContinuumGoalEnv", "REWARD_TYPES", "GOAL_DIM", "pose_goal", "split_goal"]
 
 
-class ViewTrackingGoalEnv(ContinuumGoalEnv):
-    __doc__ = __doc__
-    base_id = "ContinuumGym/ViewTracking-v0"
+def __getattr__(name: str):
+    from continuum_gym.envs.moved import moved
 
-    def __init__(self, reward_type: str = "dense", or_threshold: float = 0.8, **kwargs: Any) -> None:
-        self.or_threshold = fraction(or_threshold, "or_threshold")
-        super().__init__(reward_type, **kwargs)
-
-    def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:
-        core = self.core
-        p_cam, R_cam = core.robot.forward_kinematics(np.ascontiguousarray(core.q[0]))
-        p_dv, R_dv = core.davinci.forward_kinematics(core.davinci_configuration(0))
-        return _pose_goal(p_cam, R_cam), _pose_goal(p_dv, R_dv)
-
-    def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> np.ndarray:
-        """Overlap ratio (dense) or its threshold indicator (sparse) of camera-pose goal pairs, batched."""
-        from continuum_gym.geometry import overlap_ratio
-
-        p_a, R_a, _ = _split_goal(achieved_goal, "achieved_goal")
-        p_d, R_d, _ = _split_goal(desired_goal, "desired_goal")
-        ratio = np.asarray(overlap_ratio(p_d, R_d, p_a, R_a, self.core.frustum), dtype=np.float64)
-        if self.reward_type == "sparse":
-            return -(ratio <= self.or_threshold).astype(np.float64)
-        return ratio
-
-
-GOAL_ENVS = {"ContinuumGym/OcclusionAvoidanceGoal-v0": "continuum_gym.envs.goal:OcclusionAvoidanceGoalEnv",
-             "ContinuumGym/ViewTrackingGoal-v0": "continuum_gym.envs.goal:ViewTrackingGoalEnv"}
+    return moved(__name__, name)

@@ -7,13 +7,13 @@ imports no environment module.
 
 from __future__ import annotations
 
+from collections import defaultdict
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from continuum_gym import plugins
-from continuum_gym.envs.ids import OCCLUSION, VIEW
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,8 @@ class CustomController:
     rates: Any
     params: np.ndarray
     doc: str = ""
+    #: the env's module that compiles, checks and calls it (``EnvSpec.controller_module``)
+    module: str = ""
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """SB3 ``predict`` on a controller observation dict (``core.controller_observation(row)``)."""
@@ -49,12 +51,13 @@ class RewardTerm:
     with_rates: bool = True
 
 
-ROBOTS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
-TASKS: dict[str, dict[str, Any]] = {OCCLUSION: {}, VIEW: {}}
-CONTROLLERS: dict[str, dict[str, CustomController]] = {OCCLUSION: {}, VIEW: {}}
-REWARD_TERMS: dict[str, dict[str, RewardTerm]] = {OCCLUSION: {}, VIEW: {}}
+# One table per kind, keyed by env id (an env's entry appears on first use: any registered env has one).
+ROBOTS: defaultdict[str, dict[str, Any]] = defaultdict(dict)
+TASKS: defaultdict[str, dict[str, Any]] = defaultdict(dict)
+CONTROLLERS: defaultdict[str, dict[str, CustomController]] = defaultdict(dict)
+REWARD_TERMS: defaultdict[str, dict[str, RewardTerm]] = defaultdict(dict)
 #: The importable module each plug-in was registered from (None: __main__, a notebook), per env and name.
-ORIGINS: dict[str, dict[tuple[str, str], str | None]] = {OCCLUSION: {}, VIEW: {}}
+ORIGINS: defaultdict[str, dict[tuple[str, str], str | None]] = defaultdict(dict)
 TABLES = {"robot": ROBOTS, "task": TASKS, "controller": CONTROLLERS, "reward term": REWARD_TERMS}
 
 

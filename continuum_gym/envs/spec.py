@@ -12,10 +12,11 @@ help and argument errors answer at once.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
+from typing import Any
 
-from continuum_gym.envs.config import EnvConfig, OcclusionConfig, ViewTrackingConfig
+from continuum_gym.envs.config import EnvConfig
+from continuum_gym.plugins import load_object as load
 from continuum_gym.validation import closest
 
 
@@ -99,6 +100,23 @@ class EnvSpec:
     #: "module:Class" of the pybullet scene that draws the env (``Scene.from_core`` / ``show_row``):
     #: named, not imported, so the environments do not depend on the renderer
     scene: str = ""
+    # What the rest of the library asks of an environment, named here so that no module outside its package
+    # branches on its id. Each "module:name" is imported on first use; an empty value: the env lacks it.
+    goal_id: str = ""  #: id of the goal-conditioned front end (HER), registered beside ``env_id``
+    goal_entry_point: str = ""  #: "module:Class" of that front end
+    robot_class: str = ""  #: "module:Class" of the robots ``registry.register_robot`` files under this env
+    #: the module a registered controller is compiled, checked and called through (``envs/custom.py``'s
+    #: ``controller_module``)
+    controller_module: str = ""
+    #: config fields the offline optimum depends on (the task, rewards and base controller do not); ():
+    #: no optimum is known for the env
+    physics: tuple[str, ...] = ()
+    #: "module:function" computing the optimum cache of a variant:
+    #: ``fn(config, *, episodes, grid, split, progress, workers) -> dict`` keyed by ``references``' cache keys
+    optimum: str = ""
+    #: "module:function"s that call the env's library API (batched kinematics, baselines) once, so that
+    #: ``continuum-gym precompile`` compiles what ``continuum-gym reproduce`` runs
+    warm_ups: tuple[str, ...] = ()
 
     @property
     def short_name(self) -> str:
@@ -106,12 +124,17 @@ class EnvSpec:
         return self.env_id.split("/")[-1].split("-")[0]
 
     def core_class(self) -> type:
-        module, name = self.core.split(":")
-        return getattr(importlib.import_module(module), name)
+        return load(self.core)
 
     def scene_class(self) -> type:
-        module, name = self.scene.split(":")
-        return getattr(importlib.import_module(module), name)
+        return load(self.scene)
+
+    def hook(self, name: str) -> Any:
+        """The object a "module:name" field names (``spec.hook("optimum")``), imported now."""
+        reference = getattr(self, name)
+        if not reference:
+            raise ValueError(f"{self.short_name} has no {name} (its EnvSpec leaves {name} empty)")
+        return load(reference)
 
     def metric(self, name: str) -> Metric:
         for metric in self.metrics:
@@ -124,88 +147,9 @@ class EnvSpec:
         return self.core_class()(num_envs=num_envs, **env_kwargs)
 
 
-OCCLUSION_SPEC = EnvSpec(
-    env_id=OcclusionConfig.env_id,
-    config_class=OcclusionConfig,
-    core="continuum_gym.envs.occlusion:OcclusionCore",
-    scene="continuum_gym.render.occlusion_scene:OcclusionScene",
-    entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceEnv",
-    vector_entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceVectorEnv",
-    max_episode_steps=1000,
-    baselines=OcclusionConfig.baselines,
-    headline_baseline="projected_gradient",
-    headline_metric="mean_voi",
-    metrics=(
-        Metric("mean_voi", "mean visual occlusion index (VOI)", "", False),
-        Metric("tip_in_view_fraction", "tip in view (within 0.7 of the half-angle)", "", True),
-        Metric("mean_tip_error_m", "mean tip position error", "m", False, "mm", 1e3),
-        Metric("mean_orientation_error_rad", "mean tip orientation error", "rad", False),
-    ),
-    episode_metrics=(
-        EpisodeMetric("mean_voi", "voi"),
-        EpisodeMetric("tip_in_view_fraction", "in_view"),
-        EpisodeMetric("mean_tip_error_m", "tip_error"),
-        EpisodeMetric("mean_orientation_error_rad", "orientation_error"),
-        EpisodeMetric("visibility_guarded_fraction", "guarded"),
-    ),
-    task_sets=(TaskSet("hold"), TaskSet("random"), TaskSet("circle", episodes=1)),
-    diagnostics=("visibility_guarded_fraction",),
-    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target"),
-    references=(ReferenceRow("offline_optimum", "hold_test", "optimum_voi", "mean_voi", "per_task", "hold",
-                             "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"),),
-    optimum_tasks=("hold", "circle"),
-    headroom=("hold", "mean_voi"),
-    trace_task="circle",
-    trace_value="voi",
-    cameras=("external", "endoscope"),
-    record_task="circle",
-    record_value="voi",
-)
-
-VIEW_SPEC = EnvSpec(
-    env_id=ViewTrackingConfig.env_id,
-    config_class=ViewTrackingConfig,
-    core="continuum_gym.envs.view_tracking:ViewTrackingCore",
-    scene="continuum_gym.render.view_scene:ViewTrackingScene",
-    entry_point="continuum_gym.envs.view_tracking:ViewTrackingEnv",
-    vector_entry_point="continuum_gym.envs.view_tracking:ViewTrackingVectorEnv",
-    max_episode_steps=1000,
-    baselines=ViewTrackingConfig.baselines,
-    headline_baseline="dimension_reduced",
-    headline_metric="mean_or",
-    metrics=(
-        Metric("mean_or", "mean overlap ratio (OR)", "", True),
-        Metric("or_above_0.8_fraction", "steps with OR > 0.8", "", True),
-        Metric("mean_position_error_m", "mean target-point error", "m", False, "mm", 1e3),
-        Metric("coverage_percent", "coverage (final OR > 0.8 on the grid)", "%", True, grid_metric="final_or",
-               threshold=0.8),
-    ),
-    episode_metrics=(
-        EpisodeMetric("mean_or", "or"),
-        EpisodeMetric("or_above_0.8_fraction", "or_above"),
-        EpisodeMetric("mean_position_error_m", "position_error"),
-        EpisodeMetric("final_or", "or", "final"),
-    ),
-    task_sets=(TaskSet("static"), TaskSet("random"), TaskSet("case1", episodes=1), TaskSet("case2", episodes=1),
-               TaskSet("coverage", grid=True)),
-    diagnostics=(),
-    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target"),
-    references=(
-        ReferenceRow("offline_optimum", "coverage", "optimum_or", "coverage_percent", "coverage", "coverage"),
-        ReferenceRow("bounded_least_squares", "coverage", "bounded_least_squares_or", "coverage_percent", "coverage",
-                     "coverage"),
-    ),
-    optimum_tasks=("coverage",),
-    headroom=("coverage", "coverage_percent"),
-    trace_task="case1",
-    trace_value="or",
-    cameras=("external", "endoscope", "davinci"),
-    record_task="case1",
-    record_value="overlap_ratio",
-)
-
-#: Every environment of the library, by id (the registration loop and the tests iterate over it).
-ENV_SPECS = {spec.env_id: spec for spec in (OCCLUSION_SPEC, VIEW_SPEC)}
+#: Every environment of the library, by id: filled by ``envs.registration.register_env`` as each environment's
+#: package is imported (``import continuum_gym`` imports the library's own).
+ENV_SPECS: dict[str, EnvSpec] = {}
 
 
 def get_spec(env_id: str) -> EnvSpec:
@@ -252,5 +196,11 @@ def _registered(env_id: str):
     return registry.get(env_id)
 
 
-__all__ = ["EnvSpec", "Metric", "EpisodeMetric", "TaskSet", "ReferenceRow", "ENV_SPECS", "OCCLUSION_SPEC", "VIEW_SPEC",
-           "get_spec", "registered_kwargs", "registered_base"]
+__all__ = ["EnvSpec", "Metric", "EpisodeMetric", "TaskSet", "ReferenceRow", "ENV_SPECS", "get_spec",
+           "registered_kwargs", "registered_base"]
+
+
+def __getattr__(name: str):
+    from continuum_gym.envs.moved import moved
+
+    return moved(__name__, name)

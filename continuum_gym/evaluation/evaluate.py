@@ -22,8 +22,6 @@ import numpy as np
 
 from continuum_gym.envs.spec import (
     ENV_SPECS,
-    OCCLUSION_SPEC,
-    VIEW_SPEC,
     EnvSpec,
     get_spec,
     registered_base,
@@ -38,8 +36,6 @@ from continuum_gym.evaluation.tables import (
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
 
-OCCLUSION = OCCLUSION_SPEC.env_id
-VIEW = VIEW_SPEC.env_id
 POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
 
 

@@ -14,15 +14,9 @@ import json
 import os
 import sys
 from pathlib import Path
-from typing import cast
 
-from continuum_gym.envs.config import OcclusionConfig, ViewTrackingConfig
-from continuum_gym.envs.spec import OCCLUSION_SPEC, VIEW_SPEC, EnvSpec
+from continuum_gym.envs.spec import EnvSpec
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH as SHIPPED
-
-#: The config fields each env's ceiling depends on (the task, rewards and base controller do not matter).
-PHYSICS = {OCCLUSION_SPEC.env_id: ("robot", "cone", "max_bend", "insertion"),
-           VIEW_SPEC.env_id: ("robot", "davinci")}
 
 
 def cache_directory() -> Path:
@@ -34,8 +28,7 @@ def cache_directory() -> Path:
 def physics(spec: EnvSpec, env_kwargs: dict) -> dict:
     """The plain values of the fields the ceiling depends on, for the env built from ``env_kwargs``."""
     config = spec.config_class.from_kwargs(**env_kwargs).to_dict()
-    fields = PHYSICS[spec.env_id]
-    return {name: config[name] for name in fields}
+    return {name: config[name] for name in spec.physics}
 
 
 def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int = 32, grid: int = 21,
@@ -48,15 +41,16 @@ def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int
     instances with an optimum; the coverage grid is a test-only task.
     """
     env_kwargs = dict(env_kwargs or {})
-    if spec.env_id not in PHYSICS:
-        return None  # an env registered by a plug-in: no optimum is known for it
+    if not spec.physics or not spec.optimum:
+        return None  # no optimum is known for the env
     mine = physics(spec, env_kwargs)
-    occlusion = spec.env_id == OCCLUSION_SPEC.env_id
     if split == "test" and mine == physics(spec, {}):
         return json.loads(SHIPPED.read_text()) if SHIPPED.exists() else None
-    if split != "test" and not occlusion:
+    # a test-only task (a grid) has no instances in the other splits
+    if split != "test" and all(row.task in spec.config_class.test_only_tasks for row in spec.references):
         return None
-    size = episodes if occlusion else grid
+    size = grid if any(task_set.grid for task_set in spec.task_sets if task_set.task in
+                       {row.task for row in spec.references}) else episodes
     digest = hashlib.sha256(json.dumps({"env": spec.env_id, "physics": mine, "size": size, "split": split},
                                        sort_keys=True, default=str).encode()).hexdigest()[:16]
     path = cache_directory() / f"{spec.short_name}-{digest}.json"
@@ -77,15 +71,5 @@ def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int
 def _compute(spec: EnvSpec, env_kwargs: dict, episodes: int, grid: int, split: str, progress: bool,
              workers: int) -> dict:
     config = spec.config_class.from_kwargs(**env_kwargs)
-    if spec.env_id == OCCLUSION_SPEC.env_id:
-        from continuum_gym.evaluation.optimum.occlusion import env_hold_test_optimum
-
-        occlusion = cast(OcclusionConfig, config)  # the occlusion spec's config class
-        return {"hold_test": env_hold_test_optimum(episodes, limits=occlusion.limits, workers=workers,
-                                                   progress=progress, robot=occlusion.robot, cone=occlusion.cone,
-                                                   split=split)}
-    from continuum_gym.evaluation.optimum.view import coverage_optimum
-
-    view = cast(ViewTrackingConfig, config)  # the other built-in spec's
-    return {"coverage": coverage_optimum(grid, workers=workers, progress=progress, global_check=0, robot=view.robot,
-                                         davinci=view.davinci)}
+    return spec.hook("optimum")(config, episodes=episodes, grid=grid, split=split, progress=progress,
+                                workers=workers)

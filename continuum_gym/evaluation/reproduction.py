@@ -186,3 +186,25 @@ def reproduce(quick: bool = False, grid: int | None = None, progress: bool = Tru
         else:
             results[name] = value
     return results
+def warm_up_occlusion() -> None:
+    """The robot's and the baselines' batched Python API, as ``continuum-gym reproduce`` calls them
+    (``EnvSpec.warm_ups``: ``continuum-gym precompile`` compiles them)."""
+    from continuum_gym.robots import MultiBackboneRobot
+
+    robot = MultiBackboneRobot()
+    hold_part(robot, 2, 0)
+    circle_part(robot)
+
+
+def warm_up_view() -> None:
+    """As ``warm_up_occlusion``, for ViewTracking; and the overlap ratio's public entry points."""
+    from continuum_gym.geometry import overlap_ratio
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+
+    endoscope, davinci = ContinuumEndoscope(), DaVinciEndoscope()
+    coverage_part(endoscope, davinci, 3)
+    case_part(endoscope, davinci)
+    overlap_ratio(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))  # one pair, then a batch
+    overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
+
+

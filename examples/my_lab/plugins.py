@@ -14,7 +14,7 @@ from gymnasium.envs.registration import register, registry
 from numba import njit
 
 from continuum_gym.envs import TipTrajectory
-from continuum_gym.envs.occlusion_kernel import FLAG_TERMINATED, METRIC_TIP_ERROR
+from continuum_gym.envs.occlusion.kernel import FLAG_TERMINATED, METRIC_TIP_ERROR
 from continuum_gym.geometry import LensCone
 from continuum_gym.registry import register_controller, register_reward_term, register_robot, register_task
 from continuum_gym.robots import MultiBackboneRobot

@@ -50,7 +50,7 @@ CHILD = textwrap.dedent('''
 
     import gymnasium as gym
     import continuum_gym
-    from continuum_gym.envs.occlusion_kernel import METRIC_TIP_ERROR
+    from continuum_gym.envs.occlusion.kernel import METRIC_TIP_ERROR
     from continuum_gym.registry import register_controller, register_reward_term
     from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 

@@ -18,7 +18,7 @@ from continuum_gym.envs.occlusion import (
     OcclusionAvoidanceEnv,
     OcclusionAvoidanceVectorEnv,
 )
-from continuum_gym.envs.tasks import hold_start_pool
+from continuum_gym.envs.occlusion.tasks import hold_start_pool
 from continuum_gym.envs.view_tracking import ViewTrackingEnv, ViewTrackingVectorEnv
 
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
@@ -318,7 +318,7 @@ def test_visibility_guard_keeps_the_tip_in_view_and_says_so(direction):
 
 
 def test_guard_gamma_rate_keeps_the_largest_feasible_share_of_the_residual():
-    from continuum_gym.envs.occlusion_kernel import guard_gamma_rate, view_fraction_at
+    from continuum_gym.envs.occlusion.kernel import guard_gamma_rate, view_fraction_at
 
     core = OcclusionAvoidanceEnv(task="hold").core
     prm = core.controller.params.cone

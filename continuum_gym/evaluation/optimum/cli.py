@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from continuum_gym.envs.spec import ENV_SPECS, OCCLUSION_SPEC, VIEW_SPEC
+from continuum_gym.envs.spec import ENV_SPECS
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH, load_optimum_cache
 from continuum_gym.evaluation.optimum.protocol import (
     COVERAGE_GRID,
@@ -19,11 +19,12 @@ from continuum_gym.evaluation.optimum.protocol import (
 )
 from continuum_gym.validation import integer
 
-VIEW_TRACKING_ID = VIEW_SPEC.env_id
-OCCLUSION_ID = OCCLUSION_SPEC.env_id
 #: Tasks of each environment id (from its spec); ``all`` means every id.
-ENV_TASKS = {env_id: spec.optimum_tasks for env_id, spec in ENV_SPECS.items()}
+ENV_TASKS = {env_id: spec.optimum_tasks for env_id, spec in ENV_SPECS.items() if spec.optimum_tasks}
 TASKS = tuple(task for tasks in ENV_TASKS.values() for task in tasks)
+#: The ids of the two papers' environments, found by the optimum tasks this command computes for them.
+VIEW_TRACKING_ID = next(env_id for env_id, tasks in ENV_TASKS.items() if "coverage" in tasks)
+OCCLUSION_ID = next(env_id for env_id, tasks in ENV_TASKS.items() if "hold" in tasks)
 
 
 # ====================================================================== CLI
@@ -44,7 +45,8 @@ def resolve_tasks(env: str, task: str = "all") -> tuple[str, ...]:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", required=True,
-                        help=f"environment id: {VIEW_TRACKING_ID} (coverage), {OCCLUSION_ID} (hold, circle), all, "
+                        help="environment id: " + ", ".join(f"{env_id} ({', '.join(tasks)})" for env_id, tasks in
+                                                            ENV_TASKS.items()) + ", all, "
                              "or your registered id (its variant's ceiling, as evaluate uses it)")
     parser.add_argument("--task", default="all", help="coverage, hold, circle or all (default: the env's tasks)")
     parser.add_argument("--grid", type=int, default=COVERAGE_GRID, help="coverage grid points per axis (default 21)")

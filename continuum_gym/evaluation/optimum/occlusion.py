@@ -398,7 +398,7 @@ def env_hold_test_optimum(n_tasks: int = ENV_HOLD_TASKS, limits: OcclusionLimits
     method with the best configuration-and-gamma on exactly the same tasks. ``robot`` and ``cone`` (None:
     the paper's) give the ceiling of a variant; its hold starts are the env's own for that robot.
     """
-    from continuum_gym.envs.tasks import hold_start_pool
+    from continuum_gym.envs.occlusion.tasks import hold_start_pool
 
     limits = OcclusionLimits() if limits is None else limits
     variant = () if robot is None and cone is None else (robot or MultiBackboneRobot(), cone or LensCone())
@@ -413,3 +413,9 @@ def env_hold_test_optimum(n_tasks: int = ENV_HOLD_TASKS, limits: OcclusionLimits
             "optimum_gamma": rounded(np.array([r["gamma"] for r in results])),
             "optimum_mean_voi": float(np.nanmean(voi)), "visibility": visibility,
             "limits": {"max_bend": limits.max_bend, "insertion": list(limits.insertion)}}
+def env_optimum(config: Any, *, episodes: int, grid: int, split: str, progress: bool, workers: int) -> dict:
+    """The optimum cache of an OcclusionAvoidance variant (``EnvSpec.optimum``): its hold tasks' optimum."""
+    return {"hold_test": env_hold_test_optimum(episodes, limits=config.limits, workers=workers, progress=progress,
+                                               robot=config.robot, cone=config.cone, split=split)}
+
+

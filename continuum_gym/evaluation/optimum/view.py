@@ -387,3 +387,9 @@ def _global_check_sample(overlap, threshold, size, seed):
     rest = np.setdiff1d(np.arange(len(overlap)), near)
     drawn = np.random.default_rng(seed).choice(rest, size=size - len(near), replace=False)
     return np.sort(np.concatenate([near, drawn]))
+def env_optimum(config: Any, *, episodes: int, grid: int, split: str, progress: bool, workers: int) -> dict:
+    """The optimum cache of a ViewTracking variant (``EnvSpec.optimum``): its coverage grid's optimum."""
+    return {"coverage": coverage_optimum(grid, workers=workers, progress=progress, global_check=0, robot=config.robot,
+                                         davinci=config.davinci)}
+
+

@@ -1,6 +1,6 @@
 """OcclusionAvoidance's step under a model error (issue 37): nominal controller, true plant.
 
-The same control step as ``occlusion_kernel.occlusion_step_row`` (baseline + residual per substep,
+The same control step as ``occlusion.kernel.occlusion_step_row`` (baseline + residual per substep,
 null-space projection, rate saturation, visibility guard), with the plant of ``envs/model_error.py``:
 
 - the baseline, the null-space projection and the guard compute with the **nominal** robot and cone
@@ -16,7 +16,7 @@ encoder); the tip as the endoscope sees it (the true tip in the true lens frame,
 the nominal calibration, plus ``tip_noise_m``) for the tip errors; the tip's angle from the view axis
 as seen in the image (true); the VOI *estimated* from the nominal model at the measured joints (a real
 system cannot measure eq 27); and the baseline's command. With a zero error every value equals
-``occlusion_kernel``'s bit for bit (tests/envs/test_model_error.py).
+``occlusion.kernel``'s bit for bit (tests/envs/test_model_error.py).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from continuum_gym.baselines.occlusion_kernels import wrap_angle
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, desired_point, desired_rotation
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
-from continuum_gym.envs.occlusion_kernel import (
+from continuum_gym.envs.occlusion.kernel import (
     BASE_FROZEN,
     BASE_SATURATED,
     METRIC_ORIENTATION_ERROR,

@@ -13,7 +13,6 @@ from continuum_gym.envs.batched import (
     step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
-from continuum_gym.envs.config import OcclusionConfig
 from continuum_gym.envs.info import (
     AtMost,
     InfoField,
@@ -22,7 +21,8 @@ from continuum_gym.envs.info import (
     column,
     fields_table,
 )
-from continuum_gym.envs.occlusion_kernel import (
+from continuum_gym.envs.occlusion.config import OcclusionConfig
+from continuum_gym.envs.occlusion.kernel import (
     FLAG_BASE_FROZEN,
     FLAG_BASE_SATURATED,
     FLAG_CLAMPED,
@@ -45,9 +45,10 @@ from continuum_gym.envs.occlusion_kernel import (
     observation_dim,
     occlusion_step_batch,
 )
+from continuum_gym.envs.occlusion.spec import SPEC as OCCLUSION_SPEC
+from continuum_gym.envs.occlusion.tasks import VISIBILITY_FRACTION
 from continuum_gym.envs.single import ContinuumEnv
-from continuum_gym.envs.spec import OCCLUSION_SPEC
-from continuum_gym.envs.tasks import VISIBILITY_FRACTION, TaskContext
+from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.vector import ContinuumVectorEnv
 
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
@@ -155,7 +156,7 @@ class OcclusionCore(BatchedCore):
         return self.robot.kernel_args(), self.controller.params
 
     def mismatch_kernel(self):
-        from continuum_gym.envs.occlusion_mismatch import occlusion_mismatch_batch
+        from continuum_gym.envs.occlusion.mismatch import occlusion_mismatch_batch
 
         return occlusion_mismatch_batch
 

@@ -1,6 +1,6 @@
 """ViewTracking's step under a model error (issue 37): nominal IK, true endoscope.
 
-The same control step as ``view_kernel`` (baseline IK rates + residual, rate limits, Euler step with
+The same control step as ``view_tracking.kernel`` (baseline IK rates + residual, rate limits, Euler step with
 the joint limits), with the plant of ``envs/model_error.py``: the IK (and the target-space residual)
 computes with the **nominal** endoscope at the **measured** joints; the command waits ``delay_steps``,
 the actuators follow it with ``actuator_lag_s``, and the bending angles theta1, theta2 follow their
@@ -11,7 +11,7 @@ Observation (what the real system of paper 001 has): the measured joints; the ti
 tip-mounted electromagnetic tracker (the true tip body, ``tip_noise_m`` on its position; the tracker
 cannot see the camera's mounting rotation) for the target-point and orientation errors, and the
 overlap ratio the system computes from that tracked pose; the baseline's command. With a zero error
-every value equals ``view_kernel``'s bit for bit (tests/envs/test_model_error.py).
+every value equals ``view_tracking.kernel``'s bit for bit (tests/envs/test_model_error.py).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.row_claims import first_rows, next_rows
-from continuum_gym.envs.view_kernel import (
+from continuum_gym.envs.view_tracking.kernel import (
     METRIC_OR,
     METRIC_ORIENTATION_ERROR,
     METRIC_POSITION_ERROR,

@@ -15,13 +15,12 @@ from continuum_gym.envs.batched import (
     step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
-from continuum_gym.envs.config import ViewTrackingConfig
 from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
 from continuum_gym.envs.single import ContinuumEnv
-from continuum_gym.envs.spec import VIEW_SPEC
 from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.vector import ContinuumVectorEnv
-from continuum_gym.envs.view_kernel import (
+from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
+from continuum_gym.envs.view_tracking.kernel import (
     ACTION_DIM,
     FLAG_CLAMPED,
     FLAG_RATE_SATURATED,
@@ -43,6 +42,7 @@ from continuum_gym.envs.view_kernel import (
     ViewStepParams,
     view_step_batch,
 )
+from continuum_gym.envs.view_tracking.spec import SPEC as VIEW_SPEC
 from continuum_gym.geometry.frustum import Frustum
 
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
@@ -140,7 +140,7 @@ class ViewTrackingCore(BatchedCore):
         return self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(), self.frustum.kernel_args()
 
     def mismatch_kernel(self):
-        from continuum_gym.envs.view_mismatch import view_mismatch_batch
+        from continuum_gym.envs.view_tracking.mismatch import view_mismatch_batch
 
         return view_mismatch_batch
 

@@ -1,0 +1,27 @@
+"""OcclusionAvoidance (Sarli & Simaan): one package holds all of the environment.
+
+``config`` (its keyword arguments), ``tasks`` (its built-in task families), ``kernel`` and ``mismatch``
+(the compiled step, nominal and under a model error), ``core`` (the batched core and its Gymnasium front
+ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER front end) and ``spec``
+(what the rest of the library reads about it, registered when this package is imported). Names load on
+first use, so importing the package registers the id without compiling anything.
+"""
+
+import importlib
+
+from continuum_gym.envs.occlusion.spec import SPEC
+
+_EXPORTS = {
+    "OcclusionAvoidanceEnv": "core", "OcclusionAvoidanceVectorEnv": "core", "OcclusionCore": "core",
+    "INFO_FIELDS": "core", "OcclusionConfig": "config", "OcclusionAvoidanceGoalEnv": "goal",
+    "REWARD_TERMS": "kernel", "METRIC_VOI": "kernel", "METRIC_TIP_ERROR": "kernel",
+    "METRIC_ORIENTATION_ERROR": "kernel", "METRIC_VIEW_FRACTION": "kernel", "FLAG_TERMINATED": "kernel",
+    "FLAG_TRUNCATED": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_GUARDED": "kernel",
+}
+__all__ = ["SPEC", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,465 @@
+"""One compiled call per environment step of OcclusionAvoidance, for the whole batch.
+
+Per control step and robot: for each kinematic substep, the baseline command at the current state
+(its cached value for the first substep), plus the residual (projected into the tip Jacobian's null
+space unless ``residual_space="joint"``), saturated by the rate limits (uniform scaling of the joint
+rates; gamma rate clipped), integrated by explicit Euler and clamped to the position limits. Then
+the geometry once at the new state: tip errors, VOI, tip visibility, the next baseline command, the
+observation and the reward terms.
+
+Every kernel takes a few named bundles: the batch ``OcclusionState`` (q, gamma, step counters),
+the ``TaskArrays``, the robot's and the controller's ``kernel_args`` bundles, the env's
+``OcclusionStepParams`` and the ``OcclusionOutputs`` it fills. Columns of ``metrics`` and ``flags``
+have names (``METRIC_*``, ``FLAG_*``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from continuum_gym.baselines.occlusion_kernels import (
+    make_scratch,
+    occlusion_rates_kernel,
+    wrap_angle,
+)
+from continuum_gym.envs.common_kernels import (
+    OBSERVE_ONLY,
+    clamp,
+    clip_observation,
+    desired_point,
+    desired_rotation,
+)
+from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
+from continuum_gym.envs.row_claims import first_rows, next_rows
+from continuum_gym.geometry.lens_cone import to_lens
+from continuum_gym.geometry.occlusion import voi_of_configuration
+from continuum_gym.robots.compiled import kernel
+from continuum_gym.robots.linalg import twist_gram_solve
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
+from continuum_gym.robots.rotations import orientation_error
+
+OBS_LIMIT = 10.0
+# Observation scales (documented in the env docstring).
+POSITION_ERROR_SCALE = 0.01  # m
+ORIENTATION_ERROR_SCALE = 0.1  # rad
+VELOCITY_SCALE = 0.05  # m/s
+NULLSPACE_DAMPING = 1e-12  # m², numerically exact projector away from singularities
+VOI_SAMPLES_PER_SEGMENT = 40
+# Reward terms, in this order everywhere.
+REWARD_TERMS = ("voi", "tip_position", "tip_orientation", "visibility", "action")
+N_TERMS_REWARD = len(REWARD_TERMS)
+# Failure: the tip is lost.
+MAX_TIP_ERROR = 0.01  # m
+# Share of the residual kept by the visibility guard, resolved to 2^-20.
+GUARD_BISECTIONS = 20
+
+#: Columns of ``metrics``.
+METRIC_VOI, METRIC_TIP_ERROR, METRIC_ORIENTATION_ERROR, METRIC_VIEW_FRACTION = range(4)
+N_METRICS = 4
+#: Columns of ``flags``: joint bits clamped at a position limit; joint rates scaled down; gamma rate
+#: clipped; terminated; truncated; joint bits the baseline froze (OR over the substeps); baseline rates
+#: scaled down; visibility guard cut the residual's endoscope rotation.
+(FLAG_CLAMPED, FLAG_RATE_SATURATED, FLAG_GAMMA_SATURATED, FLAG_TERMINATED, FLAG_TRUNCATED, FLAG_BASE_FROZEN,
+ FLAG_BASE_SATURATED, FLAG_GUARDED) = range(8)
+N_FLAGS = 8
+#: Columns of ``base_info``: joint bits the cached baseline command froze, and whether its rates were scaled.
+BASE_FROZEN, BASE_SATURATED = range(2)
+
+#: Per-row state of the batch: configurations (N, dof), endoscope rotations (N,) in rad, control steps (N,).
+OcclusionState = namedtuple("OcclusionState", ["q", "gamma", "steps"])
+#: What the env adds to the robot and the controller: timing, the residual's scale and space, the limits
+#: (rate scales of the action, rate and position limits, max bend), reward weights, visibility criterion
+#: and the visibility guard (<= 0: off).
+OcclusionStepParams = namedtuple("OcclusionStepParams", [
+    "control_dt", "substeps", "has_base", "nullspace", "residual_scale", "rate_scale_vec", "rate_limit",
+    "gamma_rate_limit", "lower", "upper", "max_bend", "weights", "visibility_fraction", "visibility_guard",
+])
+#: What a step writes: the cached baseline command (N, dof + 1) and its base_info (N, 2), observations,
+#: metrics, reward terms, rewards and flags.
+OcclusionOutputs = namedtuple("OcclusionOutputs", ["base_cmd", "base_info", "obs", "metrics", "terms", "rewards",
+                                                   "flags"])
+#: Per-thread scratch of ``occlusion_step_row``.
+OcclusionStepWork = namedtuple("OcclusionStepWork", ["ws", "scratch", "qdot", "residual", "projected", "cmd", "p_des",
+                                                     "v_des", "A", "B", "ones", "points", "lens", "dr", "w", "w_rate",
+                                                     "turn", "R_goal", "full_cmd"])
+
+
+def observation_dim(n_segments: int) -> int:
+    """Length of an observation row for a robot of ``n_segments`` (32 for the paper's three)."""
+    return 5 * n_segments + 17
+
+
+@kernel
+def make_step_work(n_segments, n_points, n_insert):
+    """Per-thread scratch of ``occlusion_step_row`` and ``occlusion_observe``."""
+    dof = 2 * n_segments + 1
+    m = n_insert + n_segments * VOI_SAMPLES_PER_SEGMENT + 1
+    return OcclusionStepWork(make_workspace(n_segments), make_scratch(n_points, dof), np.empty(dof), np.empty(dof),
+                             np.empty(dof), np.empty(dof), np.empty(3), np.empty(3), np.empty((6, 6)),
+                             np.empty((6, 2)), np.ones(dof), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)),
+                             np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(dof + 1))
+
+
+@kernel(inline="always")
+def project_nullspace(J, r, work, out):
+    """out = (I - J^T (J J^T + eps I)^-1 J) r for the 6 x dof tip Jacobian J."""
+    A, B = work.A, work.B
+    dof = J.shape[1]
+    for a in range(6):
+        acc = 0.0
+        for k in range(dof):
+            acc += J[a, k] * r[k]
+        B[a, 0] = acc
+        B[a, 1] = 0.0
+    twist_gram_solve(J, work.ones, NULLSPACE_DAMPING, A, B)
+    for k in range(dof):
+        acc = 0.0
+        for a in range(6):
+            acc += J[a, k] * B[a, 0]
+        out[k] = r[k] - acc
+
+
+@kernel(inline="always")
+def view_fraction_at(p, gamma, cone):
+    """Angle of point p (m, {w}) from the lens axis at endoscope rotation gamma, in half-angles."""
+    xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, cone.d_o, cone.alpha, cone.model)
+    return math.atan2(math.sqrt(xl * xl + yl * yl), zl) / cone.beta
+
+
+@kernel(borrows=True)
+def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
+    """Endoscope rate with the residual's share scaled back so the tip p stays within ``bound`` half-angles.
+
+    The baseline's own rate is never changed: the residual is cut only where it would carry the tip
+    beyond max(bound, where the baseline alone leaves it). Returns (rate, guarded).
+    """
+    limit = max(bound, view_fraction_at(p, gamma + base_rate * dt, cone))
+    if view_fraction_at(p, gamma + (base_rate + residual_rate) * dt, cone) <= limit:
+        return base_rate + residual_rate, False
+    low, high = 0.0, 1.0  # share of the residual: low is feasible, high is not
+    for _ in range(GUARD_BISECTIONS):
+        mid = 0.5 * (low + high)
+        if view_fraction_at(p, gamma + (base_rate + mid * residual_rate) * dt, cone) <= limit:
+            low = mid
+        else:
+            high = mid
+    return base_rate + low * residual_rate, True
+
+
+@kernel(inline="always")
+def cache_base_command(i, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, tip_at_qc, out):
+    """The baseline's command at the controller's joints qc into ``out.base_cmd[i]`` (and ``out.base_info[i]``),
+    cached for the next step's first substep; with ``tip_at_qc`` the tip at qc is in work.scratch (p, R, J) after."""
+    scratch = work.scratch
+    qdot = work.qdot
+    dof = qc.shape[0]
+    base_cmd = out.base_cmd
+    if env.has_base and custom is not None:
+        occlusion_slot_rates(custom, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm.cone, work.full_cmd)
+        if tip_at_qc:
+            tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
+        for k in range(dof + 1):
+            base_cmd[i, k] = work.full_cmd[k]
+        out.base_info[i, BASE_FROZEN] = 0
+        out.base_info[i, BASE_SATURATED] = 0
+    elif env.has_base:
+        gd, frozen, scale = occlusion_rates_kernel(qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
+                                                   work.ws, scratch, qdot)
+        for k in range(dof):
+            base_cmd[i, k] = qdot[k]
+        base_cmd[i, dof] = gd
+        out.base_info[i, BASE_FROZEN] = frozen
+        out.base_info[i, BASE_SATURATED] = 1 if scale < 1.0 else 0
+    else:
+        if tip_at_qc:
+            tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
+        for k in range(dof + 1):
+            base_cmd[i, k] = 0.0
+        out.base_info[i, BASE_FROZEN] = 0
+        out.base_info[i, BASE_SATURATED] = 0
+
+
+@kernel(inline="always")
+def occlusion_observation(o, i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
+                          base_cmd):
+    """Row i's observation into o (layout: ``occlusion_observe``) from the joints q, gamma, the tip position error
+    (e_p0, e_p1, e_p2) and orientation error e_w, the view fraction, the VOI and the cached baseline command."""
+    dof = q.shape[0]
+    control_dt = env.control_dt
+    for j in range(n):
+        o[j] = (0.5 * math.pi - q[2 * j]) / env.max_bend
+        o[n + 2 * j] = math.sin(q[2 * j + 1])
+        o[n + 1 + 2 * j] = math.cos(q[2 * j + 1])
+    ins = 2 * n
+    at = 3 * n
+    span = env.upper[ins] - env.lower[ins]
+    o[at] = 2.0 * (q[ins] - env.lower[ins]) / span - 1.0 if math.isfinite(span) else q[ins] / 0.02
+    o[at + 1] = math.sin(gamma)
+    o[at + 2] = math.cos(gamma)
+    o[at + 3] = e_p0 / POSITION_ERROR_SCALE
+    o[at + 4] = e_p1 / POSITION_ERROR_SCALE
+    o[at + 5] = e_p2 / POSITION_ERROR_SCALE
+    for a in range(3):
+        o[at + 6 + a] = e_w[a] / ORIENTATION_ERROR_SCALE
+        o[at + 9 + a] = v_des[a] / VELOCITY_SCALE
+    o[at + 12] = view_fraction
+    o[at + 13] = voi
+    rate_scale_vec = env.rate_scale_vec
+    for k in range(dof + 1):
+        o[at + 14 + k] = base_cmd[i, k] / rate_scale_vec[k]
+    o[at + 15 + dof] = t / (tasks.duration[i] * control_dt)
+    clip_observation(o, OBS_LIMIT)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
+    """Geometry at the state of row i: next baseline command (cached), observation and metrics.
+
+    Observation layout for n segments (see the env docstring): bends (n), sin/cos delta (2n),
+    insertion, sin/cos gamma, tip position / orientation errors, desired velocity, view fraction,
+    VOI, baseline command (dof + 1), elapsed time.
+    """
+    q = state.q[i]
+    gamma = state.gamma[i]
+    n = robot.lengths.shape[0]
+    control_dt = env.control_dt
+    sub_dt = control_dt / env.substeps
+    t = state.steps[i] * control_dt
+    scratch = work.scratch
+    # The step's scratch: the substeps that used it are done (no allocation per observation)
+    p_des = work.p_des
+    v_des = work.v_des
+    desired_point(tasks, i, t, p_des, v_des)
+    R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
+    cache_base_command(i, q, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, True, out)
+    base_cmd = out.base_cmd
+    p = scratch.p
+    R = scratch.R
+    e_w = scratch.e_w  # the baseline's evaluation above is done with it
+    orientation_error(R_des, R, scratch.work33, e_w)
+    e_p0 = p_des[0] - p[0]
+    e_p1 = p_des[1] - p[1]
+    e_p2 = p_des[2] - p[2]
+    tip_error = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
+    ori_error = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
+    voi, _, _, _ = voi_of_configuration(q, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT, work.points,
+                                        work.lens, work.dr)
+    view_fraction = view_fraction_at(p, gamma, prm.cone)
+    metrics = out.metrics
+    metrics[i, METRIC_VOI] = voi
+    metrics[i, METRIC_TIP_ERROR] = tip_error
+    metrics[i, METRIC_ORIENTATION_ERROR] = ori_error
+    metrics[i, METRIC_VIEW_FRACTION] = view_fraction
+    occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
+                          base_cmd)
+
+
+@kernel(inline="always")
+def residual_rates(i, actions, env, rate_scale_vec, dof, residual):
+    """Row i's residual: its joint rates into ``residual``; returns (|a|^2, the endoscope's residual rate,
+    whether the joint residual is projected into the tip Jacobian's null space)."""
+    action_sq = 0.0
+    for k in range(dof + 1):
+        action_sq += actions[i, k] * actions[i, k]
+    joint_residual = False
+    for k in range(dof):
+        residual[k] = actions[i, k] * env.residual_scale * rate_scale_vec[k]
+        if residual[k] != 0.0:
+            joint_residual = True
+    gamma_residual = actions[i, dof] * env.residual_scale * rate_scale_vec[dof]
+    # The null-space projection of a zero residual is that residual, to the bit (its right-hand side and
+    # solution are +0.0, and r - (+0.0) is r, signed zeros included), so a zero residual skips it and the
+    # tip Jacobian it would need: ~10 % of a step of the baseline alone (zero actions, evaluations).
+    project = env.has_base and env.nullspace and joint_residual
+    return action_sq, gamma_residual, project
+
+
+@kernel(inline="always")
+def substep_base_rates(i, s, t, dt, qc, gamma, tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen,
+                       base_saturated, ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J):
+    """The baseline's joint rates of substep s at the controller's joints qc into qdot (the cached command
+    for s == 0), and the tip Jacobian at qc where the residual is projected.
+
+    Returns (the baseline's endoscope rate, base_frozen, base_saturated), the two ORed with this substep's.
+    """
+    dof = qdot.shape[0]
+    if s == 0:
+        for k in range(dof):
+            qdot[k] = base_cmd[i, k]
+        gd = base_cmd[i, dof]
+        if project:
+            tip_kernel(qc, robot, ws, tip_p, tip_R, tip_J)
+    elif env.has_base and custom is not None:
+        desired_point(tasks, i, t, p_des, v_des)
+        R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
+        occlusion_slot_rates(custom, qc, gamma, p_des, R_des, v_des, dt, robot, prm.cone, work.full_cmd)
+        for k in range(dof):
+            qdot[k] = work.full_cmd[k]
+        gd = work.full_cmd[dof]
+        if project:
+            tip_kernel(qc, robot, ws, tip_p, tip_R, tip_J)
+    elif env.has_base:
+        desired_point(tasks, i, t, p_des, v_des)
+        R_des = desired_rotation(tasks, i, t, w, w_rate, turn, R_goal)
+        gd, frozen, base_scale = occlusion_rates_kernel(qc, gamma, p_des, R_des, v_des, dt, robot, prm, ws,
+                                                        scratch, qdot)
+        base_frozen |= frozen
+        if base_scale < 1.0:
+            base_saturated = 1
+    else:
+        for k in range(dof):
+            qdot[k] = 0.0
+        gd = 0.0
+    return gd, base_frozen, base_saturated
+
+
+@kernel(inline="always")
+def joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd):
+    """cmd = the baseline's joint rates qdot + the residual (projected where ``project``); returns the
+    uniform scale (<= 1) that brings cmd within the rate limits."""
+    dof = qdot.shape[0]
+    if project:
+        project_nullspace(tip_J, residual, work, projected)
+    else:
+        for k in range(dof):
+            projected[k] = residual[k]
+    # Uniform scaling keeps the command's direction; a baseline command already at its limit
+    # (within rounding) is left exactly as it is, so a zero residual reproduces the baseline.
+    scale = 1.0
+    for k in range(dof):
+        cmd[k] = qdot[k] + projected[k]
+        if abs(cmd[k]) > rate_limit[k] * (1.0 + 1e-12) and abs(cmd[k]) * scale > rate_limit[k]:
+            scale = rate_limit[k] / abs(cmd[k])
+    return scale
+
+
+@kernel(inline="always")
+def guard_on(env, gamma_residual):
+    """Whether the visibility guard checks this step's endoscope rate."""
+    return env.visibility_guard > 0.0 and gamma_residual != 0.0
+
+
+@kernel(inline="always")
+def endoscope_rate(qg, gamma, gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R, tip_J):
+    """The endoscope's rate: baseline + residual, guarded at the joints qg (where ``guard_on``), clipped to the
+    rate limit. Returns (rate, guarded, clipped)."""
+    if guard_on(env, gamma_residual):
+        tip_kernel(qg, robot, ws, tip_p, tip_R, tip_J)
+        g_rate, guarded = guard_gamma_rate(tip_p, gamma, gd, gamma_residual, dt, env.visibility_guard, prm.cone)
+    else:
+        g_rate, guarded = gd + gamma_residual, False
+    g_rate, clipped = clamp(g_rate, -env.gamma_rate_limit, env.gamma_rate_limit)
+    return g_rate, guarded, clipped
+
+
+@kernel(inline="always")
+def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
+                         base_frozen, base_saturated, guarded):
+    """Row i's reward terms, reward and flags after its observation."""
+    metrics = out.metrics
+    terms = out.terms
+    weights = env.weights
+    voi = metrics[i, METRIC_VOI]
+    over = metrics[i, METRIC_VIEW_FRACTION] - env.visibility_fraction
+    terms[i, 0] = -weights[0] * voi
+    terms[i, 1] = -weights[1] * metrics[i, METRIC_TIP_ERROR] / 0.001
+    terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR] / 0.01
+    terms[i, 3] = -weights[3] * (over / (1.0 - env.visibility_fraction) if over > 0.0 else 0.0)
+    terms[i, 4] = -weights[4] * action_sq / (dof + 1)
+    flags = out.flags
+    tip_error = metrics[i, METRIC_TIP_ERROR]
+    flags[i, FLAG_CLAMPED] = clamped
+    flags[i, FLAG_RATE_SATURATED] = rate_saturated
+    flags[i, FLAG_GAMMA_SATURATED] = gamma_saturated
+    flags[i, FLAG_TERMINATED] = 1 if (tip_error > MAX_TIP_ERROR or not math.isfinite(tip_error)) else 0
+    flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+    flags[i, FLAG_BASE_FROZEN] = base_frozen
+    flags[i, FLAG_BASE_SATURATED] = base_saturated
+    flags[i, FLAG_GUARDED] = guarded
+    total = 0.0
+    for k in range(N_TERMS_REWARD):
+        total += terms[i, k]
+    out.rewards[i] = total
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work):
+    """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
+
+    ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
+    observe) and at the new state on exit. The row's parts are shared with ``occlusion_mismatch`` and
+    inlined here.
+    """
+    ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
+        work.cmd
+    p_des, v_des = work.p_des, work.v_des
+    # Arrays of the bundles that the substep loop reads are taken into locals once: each read of a
+    # bundle's array is an atomic reference count in a kernel that calls another (see mbcr_kernels).
+    tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
+    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
+    rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
+    G = state.gamma
+    dof = state.q.shape[1]
+    dt = env.control_dt / env.substeps
+    q = state.q[i]
+    clamped = 0
+    rate_saturated = 0
+    gamma_saturated = 0
+    guarded = 0
+    base_frozen = out.base_info[i, BASE_FROZEN]
+    base_saturated = out.base_info[i, BASE_SATURATED]
+    base_cmd = out.base_cmd
+    action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
+    for s in range(env.substeps):
+        t = state.steps[i] * env.control_dt + s * dt
+        gd, base_frozen, base_saturated = substep_base_rates(
+            i, s, t, dt, q, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen, base_saturated,
+            ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J)
+        scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
+        if scale < 1.0:
+            rate_saturated = 1
+        for k in range(dof):
+            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
+            if hit:
+                clamped |= 1 << k
+        g_rate, hit, clipped = endoscope_rate(q, G[i], gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R,
+                                              tip_J)
+        if hit:
+            guarded = 1
+        if clipped:
+            gamma_saturated = 1
+        G[i] = wrap_angle(G[i] + g_rate * dt)
+    state.steps[i] += 1
+    occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+    finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
+                         base_frozen, base_saturated, guarded)
+
+
+@kernel(nogil=True)
+def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, out, claims, start,
+                         stop):
+    """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
+    ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).
+
+    One kernel for both, so a process loads the observation's compiled code once, inside the step's.
+    Releases the GIL, so ``BatchedCore`` steps rows on several threads, each claiming blocks of rows from
+    ``claims`` (``envs/row_claims``; ``SERIAL``: all rows on this thread); rows are independent and each is
+    computed by the same row function, so threaded results equal serial ones bit for bit.
+    """
+    work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
+    first, last = first_rows(claims, start, stop)
+    while first < last:
+        for i in range(first, last):
+            mode = active[i]
+            if mode == OBSERVE_ONLY:
+                occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+            elif mode != 0:
+                occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work)
+        first, last = next_rows(claims, start, stop, first, last)
+
+
+__all__ = ["occlusion_step_batch", "REWARD_TERMS",
+           "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]

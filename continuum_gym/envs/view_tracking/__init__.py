@@ -1,0 +1,27 @@
+"""ViewTracking (Deng, Xu et al.): one package holds all of the environment.
+
+``config`` (its keyword arguments), ``tasks`` (its built-in task families), ``kernel`` and ``mismatch``
+(the compiled step, nominal and under a model error), ``core`` (the batched core and its Gymnasium front
+ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER front end) and ``spec``
+(what the rest of the library reads about it, registered when this package is imported). Names load on
+first use, so importing the package registers the id without compiling anything.
+"""
+
+import importlib
+
+from continuum_gym.envs.view_tracking.spec import SPEC
+
+_EXPORTS = {
+    "ViewTrackingEnv": "core", "ViewTrackingVectorEnv": "core", "ViewTrackingCore": "core", "INFO_FIELDS": "core",
+    "ACTION_SCALE": "core", "ViewTrackingConfig": "config", "ViewTrackingGoalEnv": "goal",
+    "REWARD_TERMS": "kernel", "METRIC_OR": "kernel", "METRIC_POSITION_ERROR": "kernel",
+    "METRIC_ORIENTATION_ERROR": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_RATE_SATURATED": "kernel",
+    "FLAG_TERMINATED": "kernel", "FLAG_TRUNCATED": "kernel",
+}
+__all__ = ["SPEC", *sorted(_EXPORTS)]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
