@@ -114,7 +114,7 @@ def register_task(name: str, sampler: Callable, *, env: str | None = None, count
     from continuum_gym.plugins import load_object as load
 
     env = _env(env)
-    if name in get_spec(env).config_class.builtin_tasks:  # type: ignore[attr-defined]  # ClassVar of each config
+    if name in get_spec(env).config_class.builtin_tasks:
         raise ValueError(f"name {name!r} is a built-in task of {env}; pick another name")
     if not callable(sampler):
         raise ValueError(f"sampler must be callable as sampler(task_id, split, rng); got {describe(sampler)}")
@@ -168,7 +168,7 @@ def register_reward_term(name: str, fn: Callable[..., Any], *, env: str | None =
     from continuum_gym.envs.spec import get_spec
 
     env = _env(env)
-    builtin = get_spec(env).config_class.default_weights  # type: ignore[attr-defined]  # ClassVar of each config
+    builtin = get_spec(env).config_class.default_weights
     if name in builtin:
         raise ValueError(f"name {name!r} is a built-in reward term of {env}; pick another name")
     name = _name(name, REWARD_TERMS[env], "registered reward term", replace)

@@ -183,7 +183,7 @@ def test_no_environment_id_outside_its_package():
 def test_only_the_listed_modules_import_an_environment_package():
     found = []
     for name, path in _outside_the_env_packages().items():
-        for target, names, line in _imports(name, path):
+        for target, _names, line in _imports(name, path):
             if any(target == p or target.startswith(p + ".") for p in ENV_PACKAGES) and name not in ENV_NAMING:
                 found.append(f"{name}:{line} imports {target}")
         for value, line in _strings(ast.parse(path.read_text())):

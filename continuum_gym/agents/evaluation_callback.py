@@ -38,7 +38,7 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
     kwargs = {**env_kwargs, "task_split": "validation"}
     config_class = get_spec(env_id).config_class
     # a paper's fixed task has no validation instances (test_only_tasks: a ClassVar of the concrete configs)
-    if kwargs.get("task") in config_class.test_only_tasks:  # type: ignore[attr-defined]
+    if kwargs.get("task") in config_class.test_only_tasks:
         kwargs["task"] = "random"
     core = make_core(env_id, n_episodes, **kwargs)
     task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)

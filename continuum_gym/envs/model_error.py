@@ -24,8 +24,8 @@ so every method faces the same robots; with ``True`` a new instance is drawn per
 env's random stream (domain randomisation). The ranges and their sources: ``docs/model-error.md``.
 
 The per-row state (actuator positions, lagged rates, delay queues, measured joints, noise seeds)
-lives in ``MismatchState``; the compiled steps are ``envs/occlusion_mismatch.py`` and
-``envs/view_mismatch.py``. ``model_error="none"`` never reaches them: the env steps by its own
+lives in ``MismatchState``; the compiled steps are ``envs/occlusion/mismatch.py`` and
+``envs/view_tracking/mismatch.py``. ``model_error="none"`` never reaches them: the env steps by its own
 kernel, bit for bit as before.
 """
 

@@ -3,8 +3,10 @@
 An ``EnvSpec`` names the config class and the batched core of an id, its analytic baselines, the
 metrics a method is judged by (with their units and which direction is better), the evaluation task
 sets, the per-episode reductions of the per-step values, the offline-optimum rows of the table and
-what ``continuum-gym render`` records. No other module keeps a per-environment table: a third
-environment is one core, one kernel and one spec here.
+what ``continuum-gym render`` records, and the hooks (goal front end, robot class, controller module,
+optimum, precompile warm-ups) by which the rest of the library reaches the environment. Each environment's
+package registers its own spec (``envs/occlusion/spec.py``, ``envs/view_tracking/spec.py``) with
+``register_env``; this module is generic and names no environment.
 
 This module is light (no compiled code is imported until ``core_class()`` is called), so command-line
 help and argument errors answer at once.

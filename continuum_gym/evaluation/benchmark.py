@@ -41,7 +41,7 @@ def task_sets(spec: EnvSpec, split: str) -> tuple[TaskSet, ...]:
                          f"got {split!r}")
     if split == "test":
         return spec.task_sets
-    test_only = set(spec.config_class.test_only_tasks)  # type: ignore[attr-defined]  # declared by each subclass
+    test_only = set(spec.config_class.test_only_tasks)
     return tuple(t for t in spec.task_sets if t.task not in test_only)
 
 
