@@ -26,9 +26,17 @@ def _examples_on_the_path(monkeypatch) -> None:
 
 
 def _forget_my_lab() -> None:
-    for name in [m for m in sys.modules if m == "my_lab" or m.startswith("my_lab.")]:
+    """Forget the example packages (my_lab's variant, my_reach's environment) so that no other test sees them."""
+    from continuum_gym.envs.registration import ENV_IDS
+    from continuum_gym.envs.spec import ENV_SPECS
+
+    for name in [m for m in sys.modules if m.split(".")[0] in ("my_lab", "my_reach")]:
         del sys.modules[name]
-    gym.registry.pop("MyLab/Occlusion2Seg-v0", None)
+    for env_id in ("MyLab/Occlusion2Seg-v0", "MyLab/EndoscopeReach-v0"):
+        gym.registry.pop(env_id, None)
+        ENV_SPECS.pop(env_id, None)
+        if env_id in ENV_IDS:
+            ENV_IDS.remove(env_id)
 
 
 def test_the_tutorials_exist_and_hold_examples():

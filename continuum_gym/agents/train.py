@@ -59,8 +59,9 @@ if TYPE_CHECKING:
 
 ALGOS = ("ppo", "sac", "td3")
 # Values of the run keys when a block leaves them out.
-RUN_DEFAULTS = {"n_envs": 16, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000, "n_eval_episodes": 16,
-                "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2, "normalize_reward": False}
+RUN_DEFAULTS = {"n_envs": 16, "env_kwargs": {}, "residual_scale": 0.3, "burn_in_steps": 0, "eval_freq": 100000,
+                "n_eval_episodes": 16, "checkpoint_freq": 100000, "checkpoint_minutes": 5.0, "keep_checkpoints": 2,
+                "normalize_reward": False}
 
 
 class RunBusyError(RuntimeError):

@@ -159,11 +159,13 @@ class BatchedCore(abc.ABC):
     claim_block = 1  #: rows a thread claims at a time (``envs/row_claims``): larger where rows are cheap
     terminated_flag: int  #: the column of ``flags`` its step kernel sets when a row terminates
     truncated_flag: int  #: ... and when a row is truncated
+    num_threads: int  #: threads a large batch may be stepped on (``step_threads(num_threads)``), set by the constructor
     row_threads: int  #: threads a step runs on (``row_threads``), set by the constructor
     builtin_reward_names: tuple = ()  #: the env's own reward terms, in the order of its weights
     info_fields: tuple = ()  #: ``InfoField``s: one definition of ``info`` for one row and for the batch
     metric_columns: dict = {}  #: info name -> column of ``metrics``, for numpy reward terms
     num_envs: int
+    dof: int  #: joints per row: the width of joint bit flags (``info["clamped_joints"]``) and of ``q``
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
     obs: np.ndarray  # (N, obs_dim) float64

@@ -129,7 +129,7 @@ class EnvSpec:
         return load(self.core)
 
     def scene_class(self) -> type:
-        return load(self.scene)
+        return self.hook("scene")
 
     def hook(self, name: str) -> Any:
         """The object a "module:name" field names (``spec.hook("optimum")``), imported now."""

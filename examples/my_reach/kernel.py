@@ -1,0 +1,113 @@
+"""The compiled step of ``MyLab/EndoscopeReach-v0``: every row of the batch in one call.
+
+A step kernel takes the core's bundles (``core.kernel_args``) and the rows ``[start, stop)``; the
+threads of a large batch claim rows through ``claims`` (``first_rows`` / ``next_rows``). A row whose
+``active`` is ``OBSERVE_ONLY`` is observed (after a reset), not stepped.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
+from continuum_gym.envs.row_claims import first_rows, next_rows
+from continuum_gym.robots.compiled import kernel
+from continuum_gym.robots.endoscope_kernels import endoscope_kinematics, make_endoscope_workspace
+
+# Columns of ``metrics`` and ``flags`` (the core's ``info`` and the evaluation read them by these names).
+METRIC_DISTANCE = 0
+N_METRICS = 1
+FLAG_CLAMPED, FLAG_TERMINATED, FLAG_TRUNCATED = 0, 1, 2
+N_FLAGS = 3
+REWARD_TERMS = ("distance", "action")
+OBS_DIM = 17  # 8 joint features, 3 goal error, 6 base command
+OBS_LIMIT = 10.0
+GAIN = 20.0  #: Jacobian-transpose gain (1/s per m of error, per m of Jacobian)
+
+ReachState = namedtuple("ReachState", ["q", "steps"])
+ReachParams = namedtuple("ReachParams", ["control_dt", "substeps", "has_base", "residual_scale", "action_scale",
+                                         "lower", "upper", "weights"])
+ReachOutputs = namedtuple("ReachOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
+
+
+@kernel(nogil=True)  # the threads of a large batch step rows in parallel
+def reach_step_batch(state, actions, active, tasks, robot, env, custom, out, claims, start, stop):
+    """Step (or observe) every row in [start, stop) whose ``active`` is nonzero."""
+    ws = make_endoscope_workspace()
+    p_cam, R, p_ct, J = np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6))
+    goal, goal_rate, cmd = np.empty(3), np.empty(3), np.empty(6)
+    first, last = first_rows(claims, start, stop)
+    while first < last:
+        for i in range(first, last):
+            mode = active[i]
+            if mode == 0:
+                continue
+            q = state.q[i]
+            action_sq, clamped = 0.0, 0
+            if mode != OBSERVE_ONLY:
+                h = env.control_dt / env.substeps
+                for _ in range(env.substeps):
+                    base_rates(q, state.steps[i] * env.control_dt, i, tasks, robot, ws, p_cam, R, p_ct, J, goal,
+                               goal_rate, env, cmd)
+                    clamped = 0
+                    for k in range(6):
+                        a = actions[i, k]
+                        rate = cmd[k] + (a * env.residual_scale if env.has_base else a) * env.action_scale[k]
+                        q[k] += h * rate
+                        if q[k] < env.lower[k] or q[k] > env.upper[k]:
+                            q[k] = min(max(q[k], env.lower[k]), env.upper[k])
+                            clamped |= 1 << k
+                for k in range(6):
+                    action_sq += actions[i, k] * actions[i, k]
+                state.steps[i] += 1
+            distance = base_rates(q, state.steps[i] * env.control_dt, i, tasks, robot, ws, p_cam, R, p_ct, J, goal,
+                                  goal_rate, env, cmd)
+            observe(i, q, p_ct, goal, cmd, env, out)
+            out.metrics[i, METRIC_DISTANCE] = distance
+            if mode != OBSERVE_ONLY:
+                out.terms[i, 0] = -env.weights[0] * distance / 0.01
+                out.terms[i, 1] = -env.weights[1] * action_sq / 6.0
+                out.rewards[i] = out.terms[i, 0] + out.terms[i, 1]
+                out.flags[i, FLAG_CLAMPED] = clamped
+                out.flags[i, FLAG_TERMINATED] = 0 if math.isfinite(distance) else 1
+                out.flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+        first, last = next_rows(claims, start, stop, first, last)
+
+
+@kernel
+def base_rates(q, t, i, tasks, robot, ws, p_cam, R, p_ct, J, goal, goal_rate, env, cmd):
+    """The Jacobian-transpose command GAIN J_v^T (goal - p_ct) into cmd (zero without a base); the distance (m)."""
+    endoscope_kinematics(q, robot, ws, p_cam, R, p_ct, J, True)
+    desired_point(tasks, i, t, goal, goal_rate)
+    distance = 0.0
+    for a in range(3):
+        distance += (goal[a] - p_ct[a]) ** 2
+    for k in range(6):
+        rate = 0.0
+        for a in range(3):
+            rate += J[a, k] * (goal[a] - p_ct[a])
+        cmd[k] = GAIN * rate if env.has_base else 0.0
+    return math.sqrt(distance)
+
+
+@kernel
+def observe(i, q, p_ct, goal, cmd, env, out):
+    """Row i's observation: joint features, goal error / 5 cm, base command / action scale (clipped to +-10)."""
+    o = out.obs[i]
+    o[0] = q[0] / 0.05 - 1.0
+    o[1] = q[1] / math.pi
+    o[2] = q[2]
+    o[3] = math.sin(q[3])
+    o[4] = math.cos(q[3])
+    o[5] = q[4]
+    o[6] = math.sin(q[5])
+    o[7] = math.cos(q[5])
+    for a in range(3):
+        o[8 + a] = (goal[a] - p_ct[a]) / 0.05
+    for k in range(6):
+        o[11 + k] = cmd[k] / env.action_scale[k]
+        out.base_cmd[i, k] = cmd[k]
+    clip_observation(o, OBS_LIMIT)
