@@ -91,3 +91,21 @@ def test_the_variant_tutorials_shell_blocks_run_as_written(tmp_path):
     table = json.loads((tmp_path / "results" / "variant" / "results.json").read_text())["MyLab/Occlusion2Seg-v0"]
     assert {"projected_gradient", "mylab_dls", "residual_mylab_dls", "offline_optimum"} <= set(table)
     assert "headroom_closed" in table["residual_mylab_dls"]
+
+
+def test_the_column_table_of_the_extension_tutorial_names_every_kernel_column():
+    """The metric and flag columns a reward term reads are the kernels' constants: the table lists each once."""
+    import importlib
+
+    text = (ROOT / "docs" / "tutorials" / "extend.md").read_text()
+    rows = {"OcclusionAvoidance": "continuum_gym.envs.occlusion.kernel",
+            "ViewTracking": "continuum_gym.envs.view_tracking.kernel"}
+    for env, module_name in rows.items():
+        line = next(line for line in text.splitlines() if line.startswith(f"| {env} ("))
+        _, metrics_cell, flags_cell = line.strip("|").split(" | ")
+        module = importlib.import_module(module_name)
+        for prefix, cell, count in (("METRIC_", metrics_cell, module.N_METRICS), ("FLAG_", flags_cell, module.N_FLAGS)):
+            declared = {name[len(prefix):]: value for name, value in vars(module).items()
+                        if name.startswith(prefix) and isinstance(value, int)}
+            assert sorted(declared.values()) == list(range(count)), f"{module_name}: {prefix}* columns"
+            assert re.findall(r"`([A-Z_]+)`", cell) == sorted(declared, key=declared.get), f"{env} {prefix}* table"
