@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Any, ClassVar
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -18,6 +19,12 @@ from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_r
 from continuum_gym.envs.row_claims import SERIAL, run_claimed
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import integer
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.common_kernels import TaskArrays
+    from continuum_gym.envs.config import EnvConfig
+    from continuum_gym.envs.model_error import MismatchState
+    from continuum_gym.envs.tasks import TaskBatch
 
 
 @kernel
@@ -38,7 +45,7 @@ def _clip_rows(array, clipped):
     return True
 
 
-def check_actions(actions, shape, name: str = "action") -> tuple[np.ndarray, np.ndarray]:
+def check_actions(actions: Any, shape: tuple[int, ...], name: str = "action") -> tuple[np.ndarray, np.ndarray]:
     """Validate actions: exact shape, finite; clip to [-1, 1] and report which rows were clipped.
 
     Returns a fresh C-ordered (N, d) float64 array (the caller's array is never modified) and a bool
@@ -63,7 +70,7 @@ def check_actions(actions, shape, name: str = "action") -> tuple[np.ndarray, np.
 PARALLEL_MIN_ROWS = 32
 
 
-def step_threads(num_threads=None) -> int:
+def step_threads(num_threads: int | None = None) -> int:
     """Threads a core steps its rows on: ``num_threads`` in [1, NUMBA_NUM_THREADS], or the default.
 
     The default avoids oversubscription: 1 when torch is loaded in the process (a learner such as SB3,
@@ -85,8 +92,9 @@ def step_threads(num_threads=None) -> int:
 
         if getattr(parallel, "_is_initialized", False):
             return numba.get_num_threads()
-        return numba.config.NUMBA_NUM_THREADS
-    return integer(num_threads, "num_threads", low=1, high=numba.config.NUMBA_NUM_THREADS)
+        return numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set by numba.config at import
+    return integer(num_threads, "num_threads", low=1,
+                   high=numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # (as above)
 
 
 def row_threads(num_envs: int, threads: int, min_rows: int = PARALLEL_MIN_ROWS) -> int:
@@ -96,6 +104,22 @@ def row_threads(num_envs: int, threads: int, min_rows: int = PARALLEL_MIN_ROWS) 
 
 _FLOAT64 = np.dtype(np.float64)
 _UINT8 = np.dtype(np.uint8)
+
+
+class RowScene(Protocol):
+    """What a core asks of its pybullet scene (``spec.scene``, e.g. ``render.OcclusionScene``) to render a row."""
+
+    def show_row(self, core: Any, row: int) -> None: ...
+
+    def render(self, camera: str = ..., width: int = ..., height: int = ...) -> np.ndarray: ...
+
+    def close(self) -> None: ...
+
+
+class OcclusionRowScene(RowScene, Protocol):
+    """A scene that also measures the pixel occlusion of the endoscope image (``render.OcclusionScene``)."""
+
+    def pixel_occlusion(self, resolution: int = ...) -> float: ...
 
 
 def _is_kernel_array(array, dtype: np.dtype, ndim: int) -> bool:
@@ -113,9 +137,9 @@ class KernelCall:
     active (N,) uint8) have another type, layout or flag goes through numba's dispatcher.
     """
 
-    def __init__(self, kernel) -> None:
+    def __init__(self, kernel: Any) -> None:  # a numba dispatcher (``@kernel``, typed as Any)
         self.kernel = kernel
-        self.entry = None
+        self.entry: Callable[..., Any] | None = None
 
     def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, threads: int = 1,
                  block: int = 1) -> None:
@@ -151,8 +175,9 @@ class BatchedCore(abc.ABC):
         "info_fields", "metric_columns")
 
     spec: ClassVar[Any] = None  #: the env's ``EnvSpec`` (id, baselines, metrics, scene, kernels)
-    config_class: ClassVar[type] = None  #: the ``EnvConfig`` subclass the core is built from
-    step_kernel = None  #: the compiled ``*_step_batch`` of the core
+    #: The ``EnvConfig`` subclass the core is built from (None here: each concrete core sets it).
+    config_class: ClassVar[type[EnvConfig]] = None  # type: ignore[assignment]  # None: see the line above
+    step_kernel: Any = None  #: the compiled ``*_step_batch`` of the core (a numba dispatcher)
     _observe_mask: np.ndarray | None = None  # observe_rows' ``active`` (N,) uint8, zero between calls
     supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
     parallel_min_rows = PARALLEL_MIN_ROWS  #: batches of fewer rows are stepped on the calling thread alone
@@ -170,6 +195,26 @@ class BatchedCore(abc.ABC):
     single_action_space: spaces.Box
     obs: np.ndarray  # (N, obs_dim) float64
     task_count: int
+    # Set by every concrete core's constructor; declared for the methods below that read them (and ``config``,
+    # left undeclared: continuum_gym/evaluation/evaluate.py ignores its absence).
+    q: np.ndarray  # (N, dof) joints
+    steps: np.ndarray  # (N,) int64 control steps since reset
+    metrics: np.ndarray  # (N, n_metrics) float64
+    flags: np.ndarray  # (N, n_flags) int64
+    terms: np.ndarray  # (N, n_terms) float64 weighted reward terms
+    rewards: np.ndarray  # (N,) float64
+    limit: np.ndarray  # (N,) int64 episode step limits
+    control_dt: float
+    substeps: int
+    max_episode_steps: int | None
+    base_controller: str | None
+    weights: dict[str, float]
+    tasks: TaskBatch
+    _tasks: TaskArrays
+    _state: Any  # the step kernel's bundles (namedtuples of the env's kernel module)
+    _env: Any
+    _out: Any
+    _model: tuple
 
     def __init_subclass__(cls, abstract: bool = False, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -203,7 +248,8 @@ class BatchedCore(abc.ABC):
         """Every ``info`` entry for the whole batch: {name: (N, ...) array}."""
         return info_batch(self.info_fields, self)
 
-    _info_row_reader = None  # the written-out reader of info_fields, found on the first info_row
+    # the written-out reader of info_fields, found on the first info_row
+    _info_row_reader: Callable[..., dict] | None = None
 
     def info_row(self, row: int) -> dict:
         """Every ``info`` entry of one row: numpy scalars and fresh arrays."""
@@ -224,7 +270,7 @@ class BatchedCore(abc.ABC):
     def controller_observation(self, row: int = 0) -> dict:
         """The dict observation an analytic or registered controller's ``predict`` reads, for one row."""
 
-    def step(self, actions: np.ndarray, active: np.ndarray):
+    def step(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
 
         Returns (rewards, terminated, truncated) arrays and fills ``self.obs``. The value 2
@@ -259,7 +305,8 @@ class BatchedCore(abc.ABC):
         if self.base_controller is not None and self.base_controller not in self.spec.baselines \
                 and self.base_controller not in controllers:  # imports the plug-in's module, or says where to
             registered.resolve("controller", self.spec.env_id, self.base_controller)
-        self._custom = controller_slot(self.spec.env_id, controllers.get(self.base_controller))
+        self._custom = controller_slot(
+            self.spec.env_id, controllers.get(self.base_controller))  # type: ignore[arg-type]  # None: no controller
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._rates_wanted = bool(self._compiled_terms or self._numpy_terms)
         self._step_call = KernelCall(self.step_kernel if self._mismatch is None else self.mismatch_kernel())
@@ -285,10 +332,10 @@ class BatchedCore(abc.ABC):
 
     # ------------------------------------------------------------------ model error (envs/model_error.py)
     #: The ``MismatchState`` of a core whose ``model_error`` is not "none" (then ``mismatch_kernel`` steps it).
-    _mismatch = None
+    _mismatch: MismatchState | None = None
     _mismatch_args: tuple = ()  #: (its ``MismatchArrays``,), the step kernel's last bundle
 
-    def mismatch_kernel(self):
+    def mismatch_kernel(self) -> Any:
         """The compiled step of this env under a model error (imported only when one is used)."""
         raise NotImplementedError(f"{type(self).__name__} has no model-error step")
 
@@ -296,7 +343,7 @@ class BatchedCore(abc.ABC):
         """Per-row model errors and plant state when ``config.model_error`` is not "none"."""
         from continuum_gym.envs.model_error import MismatchState, is_active, with_model_error_info
 
-        if not is_active(self.config.model_error):
+        if not is_active(self.config.model_error):  # type: ignore[attr-defined]  # config: set by each concrete core
             return
         self._mismatch = MismatchState(self, env, self.dof, n_segments, self.substeps)
         self._mismatch_args = (self._mismatch.arrays,)
@@ -311,7 +358,7 @@ class BatchedCore(abc.ABC):
         if self._mismatch is not None:
             self._mismatch.reset(rows, task_ids, self.q[rows])
 
-    def observe_rows(self, rows) -> None:
+    def observe_rows(self, rows: Any) -> None:
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state.
 
         The step kernel does it for rows marked ``OBSERVE_ONLY`` (it reads no action for them): one
@@ -389,7 +436,7 @@ class BatchedCore(abc.ABC):
         rotation_at(self._tasks, row, float(t), out)
         return out
 
-    def _install_tasks(self, rows, fresh) -> None:
+    def _install_tasks(self, rows: np.ndarray | int | slice, fresh: TaskBatch) -> None:
         """Copy freshly drawn task instances into ``rows`` and restart their episodes (state from the task)."""
         from continuum_gym.envs.common_kernels import task_arrays
         from continuum_gym.envs.tasks import copy_rows, grown, row_indices
@@ -436,19 +483,19 @@ class BatchedCore(abc.ABC):
         return fields_table(self.info_fields)
 
     # ------------------------------------------------------------------ rendering (pybullet, optional)
-    def make_scene(self):
+    def make_scene(self) -> RowScene:
         """The env's pybullet scene (``spec.scene``), built for this core's robot and cameras."""
         return self.spec.scene_class().from_core(self)
 
-    def render_row(self, row: int, scene, camera: str, size: int = 128) -> np.ndarray:
+    def render_row(self, row: int, scene: RowScene, camera: str, size: int = 128) -> np.ndarray:
         """RGB image (size, size, 3) of one row's state through ``camera``."""
         scene.show_row(self, row)
         return scene.render(camera=camera, width=size, height=size)
 
-    def pixel_occlusion(self, row: int, scene, resolution: int = 128) -> float:
+    def pixel_occlusion(self, row: int, scene: RowScene, resolution: int = 128) -> float:
         """Fraction of the endoscope image's field of view the robot covers in one row's state."""
         if not self.supports_pixel_occlusion:
             raise ValueError(f"pixel_occlusion applies to OcclusionAvoidance only; this env is {self.spec.env_id}")
         scene.show_row(self, row)
-        return scene.pixel_occlusion(resolution)
+        return cast("OcclusionRowScene", scene).pixel_occlusion(resolution)  # supports_pixel_occlusion: it measures
 

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from continuum_gym.envs.trajectories import hermite_point
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.rotations import rotation_exp
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.tasks import TaskBatch
 
 #: Task instances as arrays, for both environments (see ``envs.tasks.TaskBatch``): a trajectory of the
 #: desired tip position (occlusion) or of the da Vinci configuration (view tracking), either a sum of
@@ -23,7 +27,7 @@ TaskArrays = namedtuple("TaskArrays", ["centre", "amp", "omega", "phase", "R_des
                                        "knot_t", "knot_x", "knot_m", "knot_r", "knot_rm"])
 
 
-def task_arrays(batch, limit) -> TaskArrays:
+def task_arrays(batch: TaskBatch, limit: np.ndarray) -> TaskArrays:
     """The kernel bundle of a ``TaskBatch`` (the same arrays, not copies) and the episode step limits."""
     return TaskArrays(batch.centre, batch.amp, batch.omega, batch.phase, batch.R_des, batch.duration, limit,
                       batch.n_knots, batch.knot_t, batch.knot_x, batch.knot_m, batch.knot_r, batch.knot_rm)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 from continuum_gym.validation import (
     choice,
@@ -27,6 +27,11 @@ from continuum_gym.validation import (
     number,
     weights,
 )
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.task_sources import TaskSource
+
+_Robot = TypeVar("_Robot")
 
 TASK_SPLITS = ("train", "validation", "test")
 class UnknownArgumentError(TypeError, ValueError):
@@ -54,8 +59,8 @@ def spec(unit: str = "", doc: str = "", type_name: str = "") -> dict:
 def _default(f: dataclasses.Field) -> Any:
     if f.default is not dataclasses.MISSING:
         return f.default
-    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-        return f.default_factory()  # type: ignore[misc]
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
     return None
 
 
@@ -90,6 +95,19 @@ class EnvConfig:
     residual_spaces: ClassVar[tuple] = ()  #: the values of ``residual_space``
     builtin_tasks: ClassVar[tuple] = ()  #: the built-in task families
     test_only_tasks: ClassVar[tuple] = ()  #: ... of which these are fixed evaluation tasks (test split only)
+
+    if TYPE_CHECKING:  # fields every subclass defines (declared for mypy only: here they would be fields)
+        task: Any  # a task family's name, recorded trajectories or a TaskSource
+        task_split: str
+        base_controller: str | None
+        residual_scale: float
+        reward_weights: dict
+        control_dt: float
+        substeps: int
+        max_episode_steps: int | None
+        robot: Any
+        model_error: Any  # a preset's name or a ModelError
+        randomize_model_error: bool
 
     @classmethod
     def keyword_names(cls) -> tuple:
@@ -200,9 +218,9 @@ class EnvConfig:
                          "config file; pass it again")
 
     @property
-    def task_source(self):
+    def task_source(self) -> TaskSource:
         """The ``TaskSource`` the task resolves to (a built-in family, recorded data or a registered family)."""
-        return self._task_source
+        return self._task_source  # type: ignore[attr-defined]  # set by check_common (object.__setattr__; not a field)
 
     @classmethod
     def all_default_weights(cls) -> dict:
@@ -266,7 +284,7 @@ def check_model_error(config: EnvConfig, env: str, n_segments: int) -> None:
                                                                           config.model_error))
 
 
-def resolve_robot(robot: Any, kind: type, env_id: str):
+def resolve_robot(robot: Any, kind: type[_Robot], env_id: str) -> _Robot:
     """A robot instance from an instance, a registered name (or ``"module:name"``) or None (the paper's)."""
     from continuum_gym.envs import registered
 
@@ -314,7 +332,7 @@ def _plugin_modules(config: EnvConfig) -> list:
     return sorted({module for module in modules if module})
 
 
-def _config_from_pickle(cls: type, kwargs: dict, modules: list) -> EnvConfig:
+def _config_from_pickle(cls: type[EnvConfig], kwargs: dict, modules: list) -> EnvConfig:
     """Unpickling: import the plug-ins' modules (registering them in this process), then rebuild and check."""
     from continuum_gym import plugins
 

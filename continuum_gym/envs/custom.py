@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import inspect
 from collections import namedtuple
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numba import types
@@ -19,6 +21,9 @@ from numba.typed import List
 
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import describe
+
+if TYPE_CHECKING:
+    from numba.core.typing.templates import Signature
 
 #: A controller slot: ``rates`` a typed list holding the function (or empty), its ``params`` and ``active``.
 ControllerSlot = namedtuple("ControllerSlot", ["rates", "params", "active"])
@@ -29,11 +34,45 @@ _F64 = types.float64[::1]
 _F64_2D = types.float64[:, ::1]
 _I64 = types.int64[::1]
 
+
+class RegisteredController(Protocol):
+    """What this module reads of a registered controller (``envs.registered.CustomController``, which imports
+    this module: a protocol, not an import, keeps the modules' imports acyclic)."""
+
+    @property
+    def module(self) -> str: ...
+
+    @property
+    def rates(self) -> Any: ...  # a numba.njit function
+
+    @property
+    def params(self) -> np.ndarray: ...
+
+
+class RegisteredTerm(Protocol):
+    """What this module reads of a registered reward term (``envs.registered.RewardTerm``)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def fn(self) -> Any: ...  # a numba.njit function, or a numpy callable
+
+    @property
+    def compiled(self) -> bool: ...
+
+    @property
+    def call(self) -> Any: ...
+
+    @property
+    def params(self) -> np.ndarray: ...
+
+
 TERM_DOC = ("term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,), params (m,)) -> float64 "
             "(or, without rates, term(metrics, flags, action, params))")
 
 
-def controller_module(controller):
+def controller_module(controller: RegisteredController) -> ModuleType:
     """The module through which a registered controller is compiled, checked and called.
 
     Its env's spec names it (``EnvSpec.controller_module``, recorded on the controller at registration);
@@ -46,7 +85,7 @@ def controller_module(controller):
     return importlib.import_module(controller.module)
 
 
-def term_signature():
+def term_signature() -> Signature:
     return types.float64(_F64, _I64, _F64, _F64, _F64)
 
 
@@ -61,7 +100,7 @@ def _positional_count(fn) -> int | None:
     return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in parameters)
 
 
-def takes_rates(fn, without: int) -> bool:
+def takes_rates(fn: Callable[..., Any], without: int) -> bool:
     """Whether a reward term's function takes the applied rates: one positional argument more than ``without``."""
     count = _positional_count(getattr(fn, "py_func", fn))
     return count is None or count > without
@@ -89,7 +128,7 @@ def _compiled(fn, signature, what: str, doc: str):
     return fn
 
 
-def check_controller(controller) -> None:
+def check_controller(controller: RegisteredController) -> None:
     """Compile a registered controller for its env's signature and run it once on a paper-like state."""
     module = controller_module(controller)
     _compiled(controller.rates, module.rates_signature(), "rates", module.RATES_DOC)
@@ -99,7 +138,7 @@ def check_controller(controller) -> None:
                          f"configuration it wrote {out.tolist()}")
 
 
-def check_reward_term(term):
+def check_reward_term(term: RegisteredTerm) -> Callable[..., Any]:
     """The function the step calls for ``term``: a compiled term compiled for today's signature (one of the
     older signature, without ``rates``, wrapped into it), or a numpy term checked to be callable."""
     if term.compiled:
@@ -113,7 +152,7 @@ def check_reward_term(term):
     return term.fn
 
 
-def controller_slot(env_id: str, controller=None) -> ControllerSlot | None:
+def controller_slot(env_id: str, controller: RegisteredController | None = None) -> ControllerSlot | None:
     """The slot the step kernels read: the registered controller's function, or None (the built-in bases).
 
     None, not an empty typed List: numba unboxes a typed List on every call (~40 us), and a None
@@ -153,7 +192,7 @@ def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewa
         rewards[i] += total
 
 
-def controller_predict(controller, observation) -> np.ndarray:
+def controller_predict(controller: RegisteredController, observation: Any) -> np.ndarray:
     """A registered controller's command for a controller observation dict (as the built-in ``predict``)."""
     if not isinstance(observation, dict):
         raise ValueError(f"predict reads a dict observation (core.controller_observation(row)); got "

@@ -19,13 +19,20 @@ environments (same dynamics, tasks, residual action, keyword arguments) with a `
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
 from continuum_gym.validation import choice
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+
+    from continuum_gym.envs.batched import BatchedCore
+    from continuum_gym.envs.config import EnvConfig
+    from continuum_gym.envs.single import ContinuumEnv
 
 REWARD_TYPES = ("dense", "sparse")
 GOAL_DIM = 6  #: a pose: position (m, 3) and rotation vector (rad, 3)
@@ -37,7 +44,8 @@ def pose_goal(p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return np.concatenate([p, rotation_vector(R)]).astype(np.float64)
 
 
-def split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "position (m), rotation vector (rad)"):
+def split_goal(goal: Any, name: str, size: int = GOAL_DIM, layout: str = "position (m), rotation vector (rad)"
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(positions (..., 3), rotations (..., 3, 3), the goal array) of goals (..., size) that start with a pose."""
     from scipy.spatial.transform import Rotation
 
@@ -56,11 +64,15 @@ class ContinuumGoalEnv(gym.Env):
     goal_dim: int = GOAL_DIM
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
+    if TYPE_CHECKING:  # defined by every subclass
+        def compute_reward(self, achieved_goal: Any, desired_goal: Any, info: Any) -> np.ndarray: ...
+
     def __init__(self, reward_type: str = "dense", render_mode: str | None = None, camera: str = "external",
                  **kwargs: Any) -> None:
         self.reward_type = choice(reward_type, REWARD_TYPES, "reward_type")
         self._check_goal_kwargs(kwargs)
-        self.base = gym.make(self.base_id, render_mode=render_mode, camera=camera, **kwargs).unwrapped
+        self.base = cast("ContinuumEnv",
+                         gym.make(self.base_id, render_mode=render_mode, camera=camera, **kwargs).unwrapped)
         self.render_mode = render_mode
         self.metadata = self.base.metadata
         goal_space = spaces.Box(-np.inf, np.inf, (self.goal_dim,), dtype=np.float64)
@@ -72,13 +84,13 @@ class ContinuumGoalEnv(gym.Env):
         pass
 
     @property
-    def core(self):
+    def core(self) -> BatchedCore:
         return self.base.core
 
     @property
-    def config(self):
+    def config(self) -> EnvConfig:
         """The base env's ``EnvConfig`` (``continuum_gym.save_config`` writes it)."""
-        return self.base.core.config
+        return self.base.core.config  # type: ignore[attr-defined]  # config: set by each concrete core
 
     def _observation(self, observation: np.ndarray, info: dict) -> dict:
         achieved, desired = self.goals(info)
@@ -88,18 +100,18 @@ class ContinuumGoalEnv(gym.Env):
         """(achieved_goal, desired_goal) of the current state (``info``: the base env's), each (goal_dim,)."""
         raise NotImplementedError
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict[str, np.ndarray], dict]:
         super().reset(seed=seed)
         observation, info = self.base.reset(seed=seed, options=options)
         return self._observation(observation, info), info
 
-    def step(self, action):
+    def step(self, action: npt.ArrayLike) -> tuple[dict[str, np.ndarray], float, bool, bool, dict]:
         observation, _, terminated, truncated, info = self.base.step(action)
         goal_observation = self._observation(observation, info)
         reward = float(self.compute_reward(goal_observation["achieved_goal"], goal_observation["desired_goal"], info))
         return goal_observation, reward, terminated, truncated, info
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         return self.base.render()
 
     def close(self) -> None:

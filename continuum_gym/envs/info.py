@@ -11,8 +11,9 @@ env, the vector env and the SB3 adapter report the same entries with the same va
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -124,7 +125,7 @@ def attribute(name: str) -> Attribute:
     return Attribute(name)
 
 
-def info_batch(fields: Sequence[InfoField], core) -> dict:
+def info_batch(fields: Sequence[InfoField], core: Any) -> dict:  # core: a BatchedCore (read by attribute name)
     """{name: (N, ...) array} of every field (fresh arrays, never views of the core's state)."""
     key = (id(fields), "batch")
     cached = _READERS.get(key)
@@ -142,7 +143,7 @@ NUMPY_SCALARS = {float: np.float64, bool: np.bool_, int: np.int64}
 _READERS: dict[tuple[int, str], tuple] = {}
 
 
-def row_reader(fields: Sequence[InfoField], core) -> Callable:
+def row_reader(fields: Sequence[InfoField], core: Any) -> Callable:  # core: as in info_batch
     """A function ``(core, row) -> info dict`` written out for ``fields``, made once per field list.
 
     The single env builds ``info`` every step (and the vector env its batch version, ``info_batch``);
@@ -166,7 +167,7 @@ def row_reader(fields: Sequence[InfoField], core) -> Callable:
     return reader
 
 
-def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = frozenset()) -> Callable:
+def _write_reader(fields: Sequence[InfoField], batch: bool, convert: AbstractSet[str] = frozenset()) -> Callable:
     """``info_batch(core)`` (``batch``) or ``info_row(core, row)`` for ``fields``, as compiled Python."""
     namespace: dict[str, Any] = {"_array": np.array, "_bits": _bits_of, "_bit_table": _bit_table}
     index = "" if batch else "[row]"
@@ -177,7 +178,7 @@ def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = froze
         lines.append("    bit_mask = (1 << core.dof) - 1")
     entries = []
     for k, f in enumerate(fields):
-        read = f.read
+        read: Any = f.read  # a reader with expression / batch_expression, or any callable
         written = hasattr(read, "expression")
         if written:
             source = sources.get(read.attribute)
@@ -193,7 +194,7 @@ def _write_reader(fields: Sequence[InfoField], batch: bool, convert: set = froze
         elif f.scalar is None and not getattr(read, "fresh", False):
             expression = f"_array({expression})"
         elif f.name in convert:
-            namespace[f"_kind{k}"] = NUMPY_SCALARS[f.scalar]
+            namespace[f"_kind{k}"] = NUMPY_SCALARS[cast(type, f.scalar)]  # convert holds fields with a scalar
             expression = f"_kind{k}({expression})"
         entries.append(f"        {f.name!r}: {expression},")
     name = "info_batch" if batch else "info_row"

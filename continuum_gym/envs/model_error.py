@@ -100,7 +100,8 @@ class ModelError:
             low, high, unit = LIMITS[name]
             set_(self, name, number(getattr(self, name), f"model_error.{name}", low=low, high=high, unit=unit))
         low, high, unit = LIMITS["delay_steps"]
-        set_(self, "delay_steps", integer(self.delay_steps, "model_error.delay_steps", low=low, high=high))
+        set_(self, "delay_steps", integer(self.delay_steps, "model_error.delay_steps",
+                                          low=low, high=high))  # type: ignore[arg-type]  # int bounds, float table
 
     def scales(self, n_segments: int) -> np.ndarray:
         """The length scale of each of ``n_segments`` segments."""
@@ -174,10 +175,10 @@ class ModelErrorRanges:
         axis = rng.standard_normal(3)
         axis /= max(float(np.linalg.norm(axis)), 1e-12)
         rotation = tuple(float(v) for v in axis * uniform("camera_rotation_rad"))
-        values = dict(length_scale=scales, backlash_rad=uniform("backlash_rad"),
-                      actuator_lag_s=uniform("actuator_lag_s"), joint_noise_rad=uniform("joint_noise_rad"),
-                      tip_noise_m=uniform("tip_noise_m"),
-                      delay_steps=int(rng.integers(self.delay_steps[0], self.delay_steps[1] + 1)))
+        values: dict[str, Any] = dict(length_scale=scales, backlash_rad=uniform("backlash_rad"),
+                                      actuator_lag_s=uniform("actuator_lag_s"),
+                                      joint_noise_rad=uniform("joint_noise_rad"), tip_noise_m=uniform("tip_noise_m"),
+                                      delay_steps=int(rng.integers(self.delay_steps[0], self.delay_steps[1] + 1)))
         if env == "occlusion":
             values.update(channel_offset_m=offset, lens_angle_rad=tilt)
         else:
@@ -268,7 +269,8 @@ class NamedRows(Attribute):
 class MismatchState:
     """The per-row model errors and plant state of a core whose ``model_error`` is not ``"none"``."""
 
-    def __init__(self, core, env: str, dof: int, n_segments: int, substeps: int) -> None:
+    # core: the BatchedCore (its type is not imported: envs.batched imports this module, and cycles are forbidden)
+    def __init__(self, core: Any, env: str, dof: int, n_segments: int, substeps: int) -> None:
         config = core.config
         self.env, self.dof, self.n_segments, self.substeps = env, dof, n_segments, substeps
         self.model_error = config.model_error

@@ -28,7 +28,9 @@ class CustomController:
     #: the env's module that compiles, checks and calls it (``EnvSpec.controller_module``)
     module: str = ""
 
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
+    def predict(self, observation: dict[str, Any], state: tuple[np.ndarray, ...] | None = None,
+                episode_start: np.ndarray | None = None, deterministic: bool = False
+                ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
         """SB3 ``predict`` on a controller observation dict (``core.controller_observation(row)``)."""
         from continuum_gym.envs.custom import controller_predict
 

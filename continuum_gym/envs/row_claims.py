@@ -16,6 +16,8 @@ from __future__ import annotations
 import concurrent.futures
 import os
 import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numba import types
@@ -23,6 +25,13 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from continuum_gym.robots.compiled import kernel
+
+if TYPE_CHECKING:
+    from numba.core.typing.context import BaseContext
+    from numba.core.typing.templates import Signature
+
+    #: What an intrinsic's typing function returns: its signature and code generator, or None (no match).
+    IntrinsicTyping = tuple[Signature, Callable[..., Any]] | None
 
 #: ``claims`` layout: [rows claimed so far, rows finished, rows per claim]
 CLAIMED, FINISHED, BLOCK = 0, 1, 2
@@ -44,7 +53,7 @@ def _item_pointer(context, builder, array_type, array, index):
 
 
 @intrinsic
-def atomic_add(typingctx, array, index, value):
+def atomic_add(typingctx: BaseContext, array: types.Type, index: types.Type, value: types.Type) -> IntrinsicTyping:
     """``array[index] += value`` as one atomic read-modify-write (sequentially consistent); returns the old value."""
     if not (isinstance(array, types.Array) and array.dtype == types.int64 and array.ndim == 1):
         return None
@@ -59,7 +68,7 @@ def atomic_add(typingctx, array, index, value):
 
 
 @intrinsic
-def atomic_load(typingctx, array, index):
+def atomic_load(typingctx: BaseContext, array: types.Type, index: types.Type) -> IntrinsicTyping:
     """``array[index]`` read atomically (sequentially consistent), so a write of another thread is seen."""
     if not (isinstance(array, types.Array) and array.dtype == types.int64 and array.ndim == 1):
         return None
@@ -73,7 +82,7 @@ def atomic_load(typingctx, array, index):
 
 
 @intrinsic
-def spin_pause(typingctx):
+def spin_pause(typingctx: BaseContext) -> IntrinsicTyping:
     """x86's ``pause`` (a no-op elsewhere): a busy wait that leaves the core's pipeline to its sibling."""
 
     def codegen(context, builder, signature, args):
@@ -140,7 +149,7 @@ def _executor(helpers: int) -> concurrent.futures.ThreadPoolExecutor:
 os.register_at_fork(after_in_child=_EXECUTORS.clear)
 
 
-def run_claimed(kernel_entry, args: tuple, num_rows: int, threads: int, block: int) -> None:
+def run_claimed(kernel_entry: Callable[..., Any], args: tuple, num_rows: int, threads: int, block: int) -> None:
     """``kernel_entry(*args, claims, 0, num_rows)`` on the calling thread and ``threads - 1`` pool threads.
 
     The kernel claims ``block`` rows at a time from ``claims`` (a fresh array per call, so a pool thread

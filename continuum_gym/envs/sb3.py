@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import inspect
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -21,6 +21,16 @@ from continuum_gym.envs.single import CoreOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.envs.vector import row_generators
 from continuum_gym.validation import integer
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    import numpy.typing as npt
+    from gymnasium import spaces
+    from gymnasium.envs.registration import EnvSpec as GymEnvSpec
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
+
+    from continuum_gym.envs.batched import RowScene
 
 
 def core_class(env_id: str) -> type:
@@ -46,6 +56,9 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
+    action_space: spaces.Box  # the core's single_action_space
+    metadata: dict[str, Any]
+
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
                  camera: str = "external", **kwargs: Any) -> None:
         from continuum_gym.envs.single import check_render_arguments
@@ -60,14 +73,14 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.spec = _gym_spec(env_id)
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._rngs = row_generators(seed, num_envs)
-        self._actions = None
-        self._scene = None
+        self._actions: npt.ArrayLike | None = None
+        self._scene: RowScene | None = None
         self._returns = np.zeros(num_envs)
         self._lengths = np.zeros(num_envs, dtype=np.int64)
         self._started = time.time()
 
     # ------------------------------------------------------------------ VecEnv API
-    def reset(self):
+    def reset(self) -> VecEnvObs:
         if self._seeds[0] is not None:
             self._rngs = row_generators(self._seeds, self.num_envs)
             self._reset_seeds()
@@ -77,13 +90,13 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self._lengths[:] = 0
         return self.core.obs.astype(np.float32)
 
-    def step_async(self, actions) -> None:
+    def step_async(self, actions: np.ndarray) -> None:
         shape = (self.num_envs,) + self.action_space.shape
         if np.shape(actions) != shape:  # never reshape: (2, 16) for (4, 8) would scramble the rows
             raise ValueError(f"actions must have shape {shape} (num_envs, action dim); got {np.shape(actions)}")
         self._actions = actions
 
-    def step_wait(self):
+    def step_wait(self) -> VecEnvStepReturn:
         actions, clipped = check_actions(self._actions, (self.num_envs,) + self.action_space.shape, "actions")
         rewards, terminated, truncated = self.core.step(actions, np.ones(self.num_envs, dtype=np.uint8))
         self._returns += rewards
@@ -117,18 +130,19 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
             self._scene.close()
             self._scene = None
 
-    def get_attr(self, attr_name, indices=None):
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         owner = self.core if hasattr(self.core, attr_name) else self
         return [getattr(owner, attr_name) for _ in self._indices(indices)]
 
-    def set_attr(self, attr_name, value, indices=None) -> None:
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
         """Set an attribute of the core; its rows share it, so ``indices`` must select every row."""
         if sorted(self._indices(indices)) != list(range(self.num_envs)):
             raise ValueError(f"set_attr({attr_name!r}): the {self.num_envs} rows share one batched core, so the "
                              f"attribute can only be set for all of them (indices=None); got indices={indices!r}")
         setattr(self.core, attr_name, value)
 
-    def env_method(self, method_name, *method_args, indices=None, **method_kwargs):
+    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None,
+                   **method_kwargs: Any) -> list[Any]:
         """Call a core method: per row (its first parameter is ``row``) or once for all rows."""
         method = getattr(self.core, method_name)
         rows = list(self._indices(indices))
@@ -141,10 +155,10 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         result = method(*method_args, **method_kwargs)
         return [result for _ in rows]
 
-    def env_is_wrapped(self, wrapper_class, indices=None):
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
         return [False for _ in self._indices(indices)]
 
-    def _indices(self, indices):
+    def _indices(self, indices: VecEnvIndices) -> Sequence[int]:
         if indices is None:
             return range(self.num_envs)
         rows = [indices] if isinstance(indices, (int, np.integer)) else list(indices)
@@ -152,7 +166,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
             integer(row, "indices", low=0, high=self.num_envs - 1)
         return [int(row) for row in rows]
 
-    def get_images(self):
+    def get_images(self) -> Sequence[np.ndarray | None]:
         """One RGB image per row (``render_mode="rgb_array"``), else Nones."""
         if self.render_mode is None:
             return [None] * self.num_envs
@@ -161,13 +175,13 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         return [self.core.render_row(row, self._scene, self.camera) for row in range(self.num_envs)]
 
 
-def _gym_spec(env_id: str):
+def _gym_spec(env_id: str) -> GymEnvSpec | None:
     from gymnasium.envs.registration import registry
 
     return registry.get(env_id)
 
 
-def make_env(env_id: str, **kwargs) -> gym.Env:
+def make_env(env_id: str, **kwargs: Any) -> gym.Env:
     """``gymnasium.make`` after registering the ids (for SB3's ``make_vec_env`` and rl-zoo)."""
     import continuum_gym  # noqa: F401  (registers the ids)
 

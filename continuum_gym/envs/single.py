@@ -7,13 +7,20 @@ the reward), and ``action_clipped``.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
 from continuum_gym.validation import boolean, choice
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
+    from gymnasium import spaces
+
+    from continuum_gym.envs.batched import RowScene
+    from continuum_gym.envs.config import EnvConfig
 
 #: Keys ``reset(options=...)`` understands.
 RESET_OPTIONS = ("task_id",)
@@ -47,10 +54,12 @@ def check_render_arguments(metadata: dict, core: BatchedCore, render_mode: Any, 
 class CoreOwner:
     """A front end of a batched core: ``config`` is the core's validated configuration."""
 
+    core: BatchedCore  #: set by the front end's constructor
+
     @property
-    def config(self):
+    def config(self) -> EnvConfig:
         """The env's ``EnvConfig`` (every keyword, validated; ``continuum_gym.save_config`` writes it)."""
-        return self.core.config
+        return self.core.config  # type: ignore[attr-defined]  # config: set by each concrete core
 
     @property
     def reward_names(self) -> tuple[str, ...]:
@@ -61,9 +70,9 @@ class CoreOwner:
 class SceneOwner(CoreOwner):
     """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""
 
-    _scene = None
+    _scene: RowScene | None = None
 
-    def scene(self):
+    def scene(self) -> RowScene:
         """The pybullet scene that renders this env's rows (built on first use; ``close()`` releases it)."""
         if self._scene is None:
             self._scene = self.core.make_scene()
@@ -74,7 +83,7 @@ class SceneOwner(CoreOwner):
             self._scene.close()
             self._scene = None
 
-    def __getstate__(self):
+    def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_scene"] = None  # pybullet clients do not pickle; rebuilt on demand
         return state
@@ -85,6 +94,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
 
     core_class: type = BatchedCore
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
+    action_space: spaces.Box  # the core's single_action_space
 
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
                  **kwargs: Any) -> None:
@@ -98,7 +108,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
         self._needs_reset = True
         self._active = np.ones(1, dtype=np.uint8)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
         options = check_reset_options(options, RESET_OPTIONS)
         task_id = options.get("task_id")
@@ -108,7 +118,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
         self._needs_reset = False
         return self.core.obs[0].astype(np.float32), self._info(clipped=False)
 
-    def step(self, action):
+    def step(self, action: npt.ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict]:
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step(): the episode has ended or never started")
         action, clipped = check_actions(action, self.action_space.shape)
@@ -130,7 +140,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
             info["pixel_occlusion"] = np.float64(self.core.pixel_occlusion(0, self.scene()))
         return info
 
-    def render(self):
+    def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None

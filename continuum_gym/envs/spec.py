@@ -15,11 +15,14 @@ help and argument errors answer at once.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from continuum_gym.envs.config import EnvConfig
 from continuum_gym.plugins import load_object as load
 from continuum_gym.validation import closest
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.batched import BatchedCore
 
 
 @dataclass(frozen=True)
@@ -144,7 +147,7 @@ class EnvSpec:
                 return metric
         raise KeyError(name)
 
-    def make_core(self, num_envs: int, **env_kwargs):
+    def make_core(self, num_envs: int, **env_kwargs: Any) -> BatchedCore:
         """A batched core of ``num_envs`` rows built from the env's keyword arguments."""
         return self.core_class()(num_envs=num_envs, **env_kwargs)
 

@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from continuum_gym.baselines.scenarios import CASE_STUDY_START
 from continuum_gym.envs.tasks import (
@@ -32,7 +33,8 @@ class TaskSource:
     def count(self, split: str, context: TaskContext) -> int:  # pragma: no cover - interface
         raise NotImplementedError
 
-    def batch(self, split: str, task_ids, context: TaskContext) -> TaskBatch:  # pragma: no cover - interface
+    def batch(self, split: str, task_ids: npt.ArrayLike,
+              context: TaskContext) -> TaskBatch:  # pragma: no cover - interface
         raise NotImplementedError
 
     def describe(self) -> str | dict:
@@ -57,11 +59,11 @@ class BuiltinTasks(TaskSource):
     def count(self, split: str, context: TaskContext) -> int:
         return self.module.task_count(self.name, split, context)
 
-    def batch(self, split: str, task_ids, context: TaskContext) -> TaskBatch:
+    def batch(self, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
         return self.module.tasks(self.name, split, task_ids, context)
 
 
-def trajectory_rows(trajectories: Sequence, task_ids, context: TaskContext) -> TaskBatch:
+def trajectory_rows(trajectories: Sequence, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
     """TaskBatch of recorded trajectories (``TipTrajectory`` or ``DaVinciTrajectory``), one per row."""
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
     occlusion = isinstance(trajectories[0], TipTrajectory)
@@ -128,7 +130,7 @@ class RecordedTasks(TaskSource):
     def count(self, split: str, context: TaskContext) -> int:
         return len(self.trajectories)
 
-    def batch(self, split: str, task_ids, context: TaskContext) -> TaskBatch:
+    def batch(self, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
         task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
         if np.any(task_ids < 0) or np.any(task_ids >= len(self.trajectories)):
             raise ValueError(f"task_id must be in [0, {len(self.trajectories)}) for {len(self.trajectories)} recorded "
@@ -147,7 +149,8 @@ class RecordedTasks(TaskSource):
 class SampledTasks(TaskSource):
     """A registered family: ``sampler(task_id, split, rng)`` returns the trajectory of each instance."""
 
-    def __init__(self, name: str, sampler: Callable, kind: type, count: int | None = None) -> None:
+    def __init__(self, name: str, sampler: Callable, kind: type[TipTrajectory] | type[DaVinciTrajectory],
+                 count: int | None = None) -> None:
         self.name, self.sampler, self.kind = name, sampler, kind
         self.instances = UNBOUNDED if count is None else int(count)
         self._seed = int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "little")
@@ -155,14 +158,14 @@ class SampledTasks(TaskSource):
     def count(self, split: str, context: TaskContext) -> int:
         return self.instances
 
-    def draw(self, split: str, task_id: int):
+    def draw(self, split: str, task_id: int) -> TipTrajectory | DaVinciTrajectory:
         trajectory = self.sampler(int(task_id), split, split_rng(self._seed, split, task_id))
         if not isinstance(trajectory, self.kind):
             raise ValueError(f"the sampler of task {self.name!r} must return a {self.kind.__name__}; got "
                              f"{describe(trajectory)} for task id {task_id}")
         return trajectory
 
-    def batch(self, split: str, task_ids, context: TaskContext) -> TaskBatch:
+    def batch(self, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
         task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
         trajectories = {int(k): self.draw(split, int(k)) for k in np.unique(task_ids)}
         rows = trajectory_rows([trajectories[int(k)] for k in task_ids], np.arange(len(task_ids)), context)

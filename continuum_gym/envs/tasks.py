@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -75,7 +76,7 @@ def empty_batch(n: int, dof: int, dim: int, knots: int = 0) -> TaskBatch:
                      np.zeros((n, knots, 3)), np.zeros((n, knots, 3)))
 
 
-def row_indices(rows, source_rows: int) -> tuple:
+def row_indices(rows: np.ndarray | int | slice, source_rows: int) -> tuple[np.ndarray | int | slice, int | slice]:
     """(target, source) indices that copy ``source_rows`` rows into ``rows``.
 
     A single env resets one row: plain indexing copies it at a third of the cost of an index array
@@ -86,7 +87,7 @@ def row_indices(rows, source_rows: int) -> tuple:
     return rows, slice(None)
 
 
-def copy_rows(target: TaskBatch, rows, source: TaskBatch) -> None:
+def copy_rows(target: TaskBatch, rows: np.ndarray | int | slice, source: TaskBatch) -> None:
     """target[rows] = source, knot arrays padded to the target's capacity."""
     capacity = target.knot_capacity
     rows, source_rows = row_indices(rows, len(source.task_id))
@@ -110,14 +111,15 @@ def grown(batch: TaskBatch, capacity: int) -> TaskBatch:
 class TaskContext:
     """What a task source needs to know of the environment."""
 
-    robot: object
+    robot: Any  # the env's robot (MultiBackboneRobot, ContinuumEndoscope, a plug-in's)
     control_dt: float
     cone: LensCone | None = None
-    limits: object | None = None  # OcclusionLimits
+    limits: Any = None  # OcclusionLimits (the env's limits, or None)
     grid: int = 21
 
 
-def sines_through(batch, i, start, amp, rng, frequency_hz):
+def sines_through(batch: TaskBatch, i: int, start: np.ndarray, amp: np.ndarray, rng: np.random.Generator,
+                  frequency_hz: tuple[float, float]) -> None:
     """Row i follows start + sum_k amp[k] (sin(w_k t + phi_k) - sin(phi_k)): random frequencies (Hz range)
     and phases, and x(0) = start exactly."""
     omega = 2 * math.pi * rng.uniform(*frequency_hz, len(amp))
@@ -132,7 +134,8 @@ def split_rng(family: int, split: str, task_id: int) -> np.random.Generator:
     return np.random.default_rng([family, SPLIT_CODE[split], int(task_id)])
 
 
-def reach_pose(robot: MultiBackboneRobot, p, R, max_bend: float, insertion: tuple, what: str) -> np.ndarray:
+def reach_pose(robot: MultiBackboneRobot, p: np.ndarray, R: np.ndarray, max_bend: float, insertion: tuple,
+               what: str) -> np.ndarray:
     """A configuration within the limits whose tip is at pose (p (m), R), by bounded least squares.
 
     ``ValueError`` naming ``what`` if the best of several starts misses by more than 0.1 mm or 1e-3 rad.
@@ -150,7 +153,7 @@ def reach_pose(robot: MultiBackboneRobot, p, R, max_bend: float, insertion: tupl
         tip, R_tip = robot.forward_kinematics(q)
         return np.concatenate([tip - p, 0.02 * rotation_vector(R @ R_tip.T)])
 
-    best = None
+    best: Any = None  # scipy's OptimizeResult
     rng = np.random.default_rng(0)
     for attempt in range(12):
         q0 = np.clip(robot.home + (rng.normal(0, 0.4, robot.dof) * np.append(np.ones(2 * n), 0.01) if attempt else 0),

@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 import numpy as np
 
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import as_finite, describe
+
+_T = TypeVar("_T")
 
 #: A recording may last at most this long (s) and have at most this many samples.
 MAX_DURATION = 3600.0
@@ -81,7 +84,7 @@ class TipTrajectory:
             raise ValueError(f"positions must have shape ({t.size}, 3) (one per time, m); got {p.shape}")
         if np.max(np.abs(p)) > 1.0:
             raise ValueError(f"positions must be within 1 m of the channel exit (m); got max |p| = {np.max(np.abs(p)):g}")
-        knots = {"t": t}
+        knots: dict[str, np.ndarray | None] = {"t": t}
         knots["x"], knots["m"] = _spline(t, p)
         if self.rotations is not None:
             from scipy.spatial.transform import Rotation
@@ -195,7 +198,7 @@ def hermite_point(t_knots, x_knots, m_knots, n, t, p, v):
         v[a] = d00 * x_knots[lo, a] + d10 * m_knots[lo, a] + d01 * x_knots[hi, a] + d11 * m_knots[hi, a]
 
 
-def as_trajectory(task: str, kind: type):
+def as_trajectory(task: Any, kind: type[_T]) -> _T:
     """``task`` if it is a ``kind``, else ``ValueError`` naming what was given."""
     if not isinstance(task, kind):
         raise ValueError(f"task must be a {kind.__name__} here; got {describe(task)}")

@@ -18,7 +18,7 @@ env's ``info[key]`` for the same state.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -34,6 +34,10 @@ from continuum_gym.envs.single import (
 )
 from continuum_gym.validation import describe, integer
 
+if TYPE_CHECKING:
+    import numpy.typing as npt
+    from gymnasium import spaces
+
 #: Keys ``reset(options=...)`` understands: task ids per row, and the rows to reset.
 VECTOR_RESET_OPTIONS = ("task_ids", "reset_mask")
 
@@ -41,7 +45,7 @@ VECTOR_RESET_OPTIONS = ("task_ids", "reset_mask")
 def row_generators(seed: Any, num_envs: int) -> list:
     """One generator per row, seeded like ``SyncVectorEnv``: seed + i, or each of a list of ints."""
     if seed is None:
-        seeds = [None] * num_envs
+        seeds: list[int | None] = [None] * num_envs
     elif isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
         seeds = [int(seed) + i for i in range(num_envs)]
     elif isinstance(seed, (list, tuple, np.ndarray)):
@@ -74,6 +78,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
     core_class: type = BatchedCore
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25,
                                 "autoreset_mode": AutoresetMode.NEXT_STEP}
+    single_action_space: spaces.Box  # the core's
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  camera: str = "external", pixel_occlusion: bool = False,
@@ -97,7 +102,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self._scene = None
 
     # ------------------------------------------------------------------ reset
-    def reset(self, *, seed: Any = None, options: dict | None = None):
+    def reset(self, *, seed: Any = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         options = check_reset_options(options, VECTOR_RESET_OPTIONS)
         mask = options.get("reset_mask")
         if mask is None:
@@ -134,7 +139,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         return self.core.obs.astype(np.float32), self._info(np.zeros(self.num_envs, dtype=bool), reset)
 
     # ------------------------------------------------------------------ step
-    def step(self, actions):
+    def step(self, actions: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step(): the vector env has not been reset")
         actions, clipped = check_actions(actions, (self.num_envs,) + self.single_action_space.shape, "actions")
@@ -193,7 +198,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         return info
 
     # ------------------------------------------------------------------ rendering
-    def render(self):
+    def render(self) -> tuple[np.ndarray, ...] | None:
         """A tuple of one RGB image per row (``render_mode="rgb_array"``; about 10 ms per row)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make_vec()")
@@ -224,15 +229,15 @@ class NamedRewardTerms(VectorWrapper):
         if terms is None or isinstance(terms, RewardTerms):
             return infos
         if self._names is None:
-            self._names = tuple(self.env.get_attr("reward_names")[0])
+            self._names = tuple(self.env.get_attr("reward_names")[0])  # type: ignore[attr-defined]  # Sync/Async have it
         infos["reward_terms"] = RewardTerms(terms, self._names)
         return infos
 
-    def step(self, actions):
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict]:
         obs, rewards, terminated, truncated, infos = self.env.step(actions)
         return obs, rewards, terminated, truncated, self._named(infos)
 
-    def reset(self, *, seed=None, options=None):
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
         obs, infos = self.env.reset(seed=seed, options=options)
         return obs, self._named(infos)
 

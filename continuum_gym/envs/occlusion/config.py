@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from continuum_gym.envs.config import (
     EnvConfig,
@@ -18,6 +18,9 @@ from continuum_gym.envs.config import (
 from continuum_gym.envs.occlusion.tasks import TASKS as OCCLUSION_TASKS
 from continuum_gym.envs.occlusion.tasks import TEST_ONLY as OCCLUSION_TEST_ONLY
 from continuum_gym.validation import choice, describe, fraction
+
+if TYPE_CHECKING:
+    from continuum_gym.baselines.occlusion import OcclusionLimits
 
 
 @dataclass(frozen=True)
@@ -100,6 +103,7 @@ class OcclusionConfig(EnvConfig):
                                  f"{self.cone.lens_model!r}: give one of them")
         if self.cone is None:
             set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
+        assert self.cone is not None  # set just above when it was not given (mypy does not see object.__setattr__)
         set_(self, "lens_model", self.cone.lens_model)
         check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
         check_model_error(self, "occlusion", self.robot.n_segments)
@@ -116,7 +120,7 @@ class OcclusionConfig(EnvConfig):
             set_(self, name, getattr(limits, name))
 
     @property
-    def limits(self):
+    def limits(self) -> OcclusionLimits:
         """The ``OcclusionLimits`` these fields define."""
         from continuum_gym.baselines.occlusion import OcclusionLimits
 

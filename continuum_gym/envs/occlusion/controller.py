@@ -3,10 +3,17 @@ convention, numba signature, trial call and ``predict``; and the compiled call i
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import typeof, types
 
 from continuum_gym.robots.compiled import kernel
+
+if TYPE_CHECKING:
+    from numba.core.typing.templates import Signature
+
+    from continuum_gym.envs.registered import CustomController
 
 F64 = types.float64[::1]
 F64_2D = types.float64[:, ::1]
@@ -23,13 +30,13 @@ def _paper_args():
     return MultiBackboneRobot().kernel_args(), LensCone().kernel_args()
 
 
-def rates_signature():
+def rates_signature() -> Signature:
     """The numba signature of a controller's ``rates`` (see ``RATES_DOC``)."""
     robot, cone = _paper_args()
     return types.void(F64, types.float64, F64, F64_2D, F64, types.float64, typeof(robot), typeof(cone), F64, F64)
 
 
-def trial_rates(controller) -> np.ndarray:
+def trial_rates(controller: CustomController) -> np.ndarray:
     """The controller's command at the paper's home configuration (NaN where it wrote nothing)."""
     from continuum_gym.robots import MultiBackboneRobot
 
@@ -41,7 +48,7 @@ def trial_rates(controller) -> np.ndarray:
     return out
 
 
-def predict(controller, observation: dict) -> np.ndarray:
+def predict(controller: CustomController, observation: dict) -> np.ndarray:
     """The controller's command (..., dof + 1) for a controller observation (``core.controller_observation``)."""
     from continuum_gym.geometry.lens_cone import LensCone
     from continuum_gym.robots import MultiBackboneRobot

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any, cast
+
 import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import VectorEnv
@@ -51,6 +53,9 @@ from continuum_gym.envs.single import ContinuumEnv
 from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.vector import ContinuumVectorEnv
 
+if TYPE_CHECKING:
+    from continuum_gym.baselines.occlusion import OcclusionController
+
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
 INFO_FIELDS = (
     InfoField("voi", column("metrics", METRIC_VOI), float, "Visual Occlusion Index (eq 27) at the new state"),
@@ -93,7 +98,7 @@ class OcclusionCore(BatchedCore):
                       "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
 
     def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, num_threads: int | None = None,
-                 **kwargs) -> None:
+                 **kwargs: Any) -> None:
         self.config = config = self._config(config, kwargs)
         self.num_envs = self._num_envs(num_envs)
         self.task, self.task_split = config.task, config.task_split
@@ -110,7 +115,8 @@ class OcclusionCore(BatchedCore):
         # The built-in baseline always exists inside (its rate limits, cone and kernels); has_base says if a base
         # acts, and a registered controller's slot replaces its command when active.
         builtin = config.base_controller if config.base_controller in self.spec.baselines else "projected_gradient"
-        self.controller = make_controller(builtin, robot=self.robot, cone=self.cone, limits=self.limits)
+        self.controller = cast("OcclusionController",  # builtin is one of this env's baselines
+                               make_controller(builtin, robot=self.robot, cone=self.cone, limits=self.limits))
         self.dof = dof = self.robot.dof
         lower, upper, rate_limit = self.limits.bounds(self.robot.n_segments)
         self.task_context = TaskContext(self.robot, self.control_dt, self.cone, self.limits)
@@ -155,7 +161,7 @@ class OcclusionCore(BatchedCore):
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params
 
-    def mismatch_kernel(self):
+    def mismatch_kernel(self) -> Any:
         from continuum_gym.envs.occlusion.mismatch import occlusion_mismatch_batch
 
         return occlusion_mismatch_batch
@@ -168,7 +174,7 @@ class OcclusionCore(BatchedCore):
     circular_joint_columns = (-1,)
 
     # ------------------------------------------------------------------ state
-    def reset_rows(self, rows, task_ids) -> None:
+    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)

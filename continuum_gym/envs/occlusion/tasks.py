@@ -9,6 +9,7 @@ import functools
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from continuum_gym.baselines.scenarios import CircleTask
 from continuum_gym.envs.tasks import (
@@ -105,7 +106,7 @@ def circle_start(robot: MultiBackboneRobot, max_bend: float, insertion: tuple) -
     return reach_pose(robot, p0, R0, max_bend, insertion, "task='circle'")
 
 
-def occlusion_tasks(task: str, split: str, task_ids, context: TaskContext) -> TaskBatch:
+def occlusion_tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
     """TaskBatch of a built-in occlusion family."""
     robot, limits = context.robot, context.limits
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
@@ -160,7 +161,7 @@ def occlusion_task_count(task: str, split: str) -> int:
     return HOLD_POOL_SIZE[split] if task == "hold" else UNBOUNDED  # random, mixed: fresh trajectories per id
 
 
-def tasks(task: str, split: str, task_ids, context: TaskContext) -> TaskBatch:
+def tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
     """The ``TaskBatch`` of a built-in family (``BuiltinTasks`` calls this)."""
     return occlusion_tasks(task, split, task_ids, context)
 

@@ -3,10 +3,17 @@ numba signature, trial call and ``predict``; and the compiled call into its slot
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from numba import typeof, types
 
 from continuum_gym.robots.compiled import kernel
+
+if TYPE_CHECKING:
+    from numba.core.typing.templates import Signature
+
+    from continuum_gym.envs.registered import CustomController
 
 F64 = types.float64[::1]
 F64_2D = types.float64[:, ::1]
@@ -15,14 +22,14 @@ RATES_DOC = "rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,
 DEFAULT_DT = 0.01
 
 
-def rates_signature():
+def rates_signature() -> Signature:
     """The numba signature of a controller's ``rates`` (see ``RATES_DOC``)."""
     from continuum_gym.robots import ContinuumEndoscope
 
     return types.void(F64, F64, F64_2D, types.float64, typeof(ContinuumEndoscope().kernel_args()), F64, F64)
 
 
-def trial_rates(controller) -> np.ndarray:
+def trial_rates(controller: CustomController) -> np.ndarray:
     """The controller's joint rates at the paper's home configuration (NaN where it wrote nothing)."""
     from continuum_gym.robots import ContinuumEndoscope
 
@@ -34,7 +41,7 @@ def trial_rates(controller) -> np.ndarray:
     return out
 
 
-def predict(controller, observation: dict) -> np.ndarray:
+def predict(controller: CustomController, observation: dict) -> np.ndarray:
     """The controller's joint rates (..., 6) for a controller observation (``core.controller_observation``)."""
     from continuum_gym.robots import ContinuumEndoscope
 

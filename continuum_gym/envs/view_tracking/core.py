@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -45,6 +46,9 @@ from continuum_gym.envs.view_tracking.kernel import (
 from continuum_gym.envs.view_tracking.spec import SPEC as VIEW_SPEC
 from continuum_gym.geometry.frustum import Frustum
 
+if TYPE_CHECKING:
+    from continuum_gym.baselines.view_tracking import ViewTrackingController
+
 #: Joint-rate command at action 1.0 (pure RL) and the unit of the residual: m/s for L0, rad/s.
 ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, math.pi])
 
@@ -85,7 +89,7 @@ class ViewTrackingCore(BatchedCore):
     dof = ACTION_DIM
 
     def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, num_threads: int | None = None,
-                 **kwargs) -> None:
+                 **kwargs: Any) -> None:
         self.config = config = self._config(config, kwargs)
         self.num_envs = self._num_envs(num_envs)
         self.task, self.task_split = config.task, config.task_split
@@ -97,7 +101,8 @@ class ViewTrackingCore(BatchedCore):
         self.substeps = 1
         self.grid = config.grid
         builtin = config.base_controller if config.base_controller in self.spec.baselines else "dimension_reduced"
-        self.controller = make_controller(builtin, robot=config.robot)
+        self.controller = cast("ViewTrackingController",  # builtin is one of this env's baselines
+                               make_controller(builtin, robot=config.robot))
         self.robot = self.controller.robot
         self.davinci = config.davinci
         self.frustum = Frustum()
@@ -139,12 +144,12 @@ class ViewTrackingCore(BatchedCore):
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params, self.davinci.kernel_args(), self.frustum.kernel_args()
 
-    def mismatch_kernel(self):
+    def mismatch_kernel(self) -> Any:
         from continuum_gym.envs.view_tracking.mismatch import view_mismatch_batch
 
         return view_mismatch_batch
 
-    def reset_rows(self, rows, task_ids) -> None:
+    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
         rows = np.asarray(rows, dtype=np.int64)
         fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
         self._install_tasks(rows, fresh)

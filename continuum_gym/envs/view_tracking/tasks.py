@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from continuum_gym.baselines.scenarios import CASE_STUDIES, CASE_STUDY_START, COVERAGE_INSERTION, coverage_grid
 from continuum_gym.envs.tasks import (
@@ -29,7 +30,7 @@ TEST_ONLY = ("case1", "case2", "coverage")
 VIEW_DURATION_S = {"random": 6.0, "static": 10.0, "pan_tilt": 10.0, "case1": 10.0, "case2": 10.0, "coverage": 10.0}
 
 
-def view_tasks(task: str, split: str, task_ids, context: TaskContext) -> TaskBatch:
+def view_tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
     """TaskBatch of a built-in view-tracking family (trajectories of q_davinci = [L_dV, yaw, pitch, roll])."""
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
     n = len(task_ids)
@@ -70,7 +71,7 @@ def view_task_count(task: str, grid: int = 21) -> int:
     return UNBOUNDED
 
 
-def tasks(task: str, split: str, task_ids, context: TaskContext) -> TaskBatch:
+def tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskContext) -> TaskBatch:
     """The ``TaskBatch`` of a built-in family (``BuiltinTasks`` calls this)."""
     return view_tasks(task, split, task_ids, context)
 
