@@ -190,6 +190,7 @@ class BatchedCore(abc.ABC):
     info_fields: tuple = ()  #: ``InfoField``s: one definition of ``info`` for one row and for the batch
     metric_columns: dict = {}  #: info name -> column of ``metrics``, for numpy reward terms
     num_envs: int
+    config: EnvConfig  #: the validated configuration the core was built from (set by the constructor)
     dof: int  #: joints per row: the width of joint bit flags (``info["clamped_joints"]``) and of ``q``
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
@@ -343,7 +344,7 @@ class BatchedCore(abc.ABC):
         """Per-row model errors and plant state when ``config.model_error`` is not "none"."""
         from continuum_gym.envs.model_error import MismatchState, is_active, with_model_error_info
 
-        if not is_active(self.config.model_error):  # type: ignore[attr-defined]  # config: set by each concrete core
+        if not is_active(self.config.model_error):
             return
         self._mismatch = MismatchState(self, env, self.dof, n_segments, self.substeps)
         self._mismatch_args = (self._mismatch.arrays,)

@@ -90,7 +90,7 @@ class ContinuumGoalEnv(gym.Env):
     @property
     def config(self) -> EnvConfig:
         """The base env's ``EnvConfig`` (``continuum_gym.save_config`` writes it)."""
-        return self.base.core.config  # type: ignore[attr-defined]  # config: set by each concrete core
+        return self.base.core.config
 
     def _observation(self, observation: np.ndarray, info: dict) -> dict:
         achieved, desired = self.goals(info)

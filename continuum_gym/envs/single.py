@@ -59,7 +59,7 @@ class CoreOwner:
     @property
     def config(self) -> EnvConfig:
         """The env's ``EnvConfig`` (every keyword, validated; ``continuum_gym.save_config`` writes it)."""
-        return self.core.config  # type: ignore[attr-defined]  # config: set by each concrete core
+        return self.core.config
 
     @property
     def reward_names(self) -> tuple[str, ...]:

@@ -236,7 +236,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         try:
             if declared is not None and declared != core.single_observation_space.shape:
                 built = {k: v for k, v in kwargs.items() if k not in ("task", "task_split", "grid")}
-                robot = core.config.to_dict().get("robot")  # type: ignore[attr-defined]  # undeclared in BatchedCore
+                robot = core.config.to_dict().get("robot")
                 raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
                                   f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
                                   f"{robot}); pass the keywords it was trained with "
