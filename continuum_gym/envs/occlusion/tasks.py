@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from continuum_gym.baselines.scenarios import CircleTask
+from continuum_gym.envs.occlusion.config import TASKS, TEST_ONLY  # noqa: F401  (named in config.py: light to import)
 from continuum_gym.envs.tasks import (
     N_TERMS,
     SPLIT_CODE,
@@ -28,9 +29,6 @@ from continuum_gym.geometry.lens_cone import LensCone, cone_coordinates
 from continuum_gym.geometry.occlusion import visual_occlusion_index
 from continuum_gym.robots.mbcr import MultiBackboneRobot, default_psps
 
-#: The families' names (the paper's ``circle`` exists only in the test split).
-TASKS = ("hold", "circle", "random", "mixed")
-TEST_ONLY = ("circle",)
 HOLD_POOL_SIZE = {"train": 512, "test": 128, "validation": 128}
 #: Hold starts: VOI at gamma = 0 in this window (paper-like, paper-notes §1.5 widened).
 HOLD_VOI_WINDOW = (0.2, 0.3)

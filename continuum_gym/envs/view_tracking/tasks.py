@@ -21,11 +21,7 @@ from continuum_gym.envs.tasks import (
     sines_through,
     split_rng,
 )
-
-#: The families' names (the paper's case studies and coverage grid exist only in the test split).
-TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
-TEST_ONLY = ("case1", "case2", "coverage")
-
+from continuum_gym.envs.view_tracking.config import TASKS, TEST_ONLY  # noqa: F401  (named in config.py: light)
 
 VIEW_DURATION_S = {"random": 6.0, "static": 10.0, "pan_tilt": 10.0, "case1": 10.0, "case2": 10.0, "coverage": 10.0}
 
