@@ -16,7 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
-from continuum_gym.envs.row_claims import SERIAL, run_claimed
+from continuum_gym.envs.row_claims import KernelCall
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import integer
 
@@ -102,10 +102,6 @@ def row_threads(num_envs: int, threads: int, min_rows: int = PARALLEL_MIN_ROWS) 
     return 1 if num_envs < min_rows else threads
 
 
-_FLOAT64 = np.dtype(np.float64)
-_UINT8 = np.dtype(np.uint8)
-
-
 class RowScene(Protocol):
     """What a core asks of its pybullet scene (``spec.scene``, e.g. ``render.OcclusionScene``) to render a row."""
 
@@ -120,41 +116,6 @@ class OcclusionRowScene(RowScene, Protocol):
     """A scene that also measures the pixel occlusion of the endoscope image (``render.OcclusionScene``)."""
 
     def pixel_occlusion(self, resolution: int = ...) -> float: ...
-
-
-def _is_kernel_array(array, dtype: np.dtype, ndim: int) -> bool:
-    # ``is``: numpy's native dtypes are singletons (any other dtype object takes the dispatcher's path);
-    # flags.carray: C-contiguous, aligned and writeable, one flags object instead of three
-    return type(array) is np.ndarray and array.dtype is dtype and array.ndim == ndim and array.flags.carray
-
-
-class KernelCall:
-    """A compiled step kernel called without numba's per-call type dispatch.
-
-    Resolving the types of the step's named bundles costs ~9 us per call (more than ViewTracking's
-    arithmetic for one robot). The bundles keep their types for the life of a core, so the compiled
-    entry point for them is looked up once; a call whose per-step arrays (actions (N, k) float64,
-    active (N,) uint8) have another type, layout or flag goes through numba's dispatcher.
-    """
-
-    def __init__(self, kernel: Any) -> None:  # a numba dispatcher (``@kernel``, typed as Any)
-        self.kernel = kernel
-        self.entry: Callable[..., Any] | None = None
-
-    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, threads: int = 1,
-                 block: int = 1) -> None:
-        """Step rows [0, num_rows) on ``threads`` threads, which claim ``block`` rows at a time."""
-        kernel = self.kernel
-        if _is_kernel_array(actions, _FLOAT64, 2) and _is_kernel_array(active, _UINT8, 1):
-            if self.entry is None:
-                signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, SERIAL, 0, 0))
-                self.kernel.compile(signature)
-                self.entry = self.kernel.overloads[signature].entry_point
-            kernel = self.entry
-        if threads <= 1:  # the single env's and small batches' path: no further Python call
-            kernel(*args, SERIAL, 0, num_rows)
-        else:
-            run_claimed(kernel, args, num_rows, threads, block)
 
 
 class BatchedCore(abc.ABC):

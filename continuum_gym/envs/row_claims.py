@@ -8,7 +8,8 @@ of the call (``claims``), and the caller waits for the last rows in compiled cod
 of one block unless the other thread was descheduled (then it falls back to blocking on the futures).
 The caller never depends on a pool thread to finish: if none comes, it steps every row itself.
 Which thread steps a row changes no result: rows are independent and each is computed by the same row
-function, bit for bit.
+function, bit for bit. ``KernelCall`` is how a batched core calls its step kernel: on the calling thread, or
+claimed among threads through ``run_claimed``.
 """
 
 from __future__ import annotations
@@ -182,4 +183,43 @@ def run_claimed(kernel_entry: Callable[..., Any], args: tuple, num_rows: int, th
         raise RuntimeError(f"batch step finished {claims[FINISHED]} of {num_rows} rows")
 
 
-__all__ = ["SERIAL", "first_rows", "next_rows", "wait_rows", "run_claimed", "atomic_add", "atomic_load"]
+_FLOAT64 = np.dtype(np.float64)
+_UINT8 = np.dtype(np.uint8)
+
+
+def _is_kernel_array(array, dtype: np.dtype, ndim: int) -> bool:
+    # ``is``: numpy's native dtypes are singletons (any other dtype object takes the dispatcher's path);
+    # flags.carray: C-contiguous, aligned and writeable, one flags object instead of three
+    return type(array) is np.ndarray and array.dtype is dtype and array.ndim == ndim and array.flags.carray
+
+
+class KernelCall:
+    """A compiled step kernel called without numba's per-call type dispatch.
+
+    Resolving the types of the step's named bundles costs ~9 us per call (more than ViewTracking's
+    arithmetic for one robot). The bundles keep their types for the life of a core, so the compiled
+    entry point for them is looked up once; a call whose per-step arrays (actions (N, k) float64,
+    active (N,) uint8) have another type, layout or flag goes through numba's dispatcher.
+    """
+
+    def __init__(self, kernel: Any) -> None:  # a numba dispatcher (``@kernel``, typed as Any)
+        self.kernel = kernel
+        self.entry: Callable[..., Any] | None = None
+
+    def __call__(self, args: tuple, actions: np.ndarray, active: np.ndarray, num_rows: int, threads: int = 1,
+                 block: int = 1) -> None:
+        """Step rows [0, num_rows) on ``threads`` threads, which claim ``block`` rows at a time."""
+        kernel = self.kernel
+        if _is_kernel_array(actions, _FLOAT64, 2) and _is_kernel_array(active, _UINT8, 1):
+            if self.entry is None:
+                signature = tuple(self.kernel.typeof_pyval(value) for value in (*args, SERIAL, 0, 0))
+                self.kernel.compile(signature)
+                self.entry = self.kernel.overloads[signature].entry_point
+            kernel = self.entry
+        if threads <= 1:  # the single env's and small batches' path: no further Python call
+            kernel(*args, SERIAL, 0, num_rows)
+        else:
+            run_claimed(kernel, args, num_rows, threads, block)
+
+
+__all__ = ["KernelCall", "SERIAL", "first_rows", "next_rows", "wait_rows", "run_claimed", "atomic_add", "atomic_load"]
