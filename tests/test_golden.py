@@ -10,6 +10,7 @@ from tests.golden import (
     CROSS_PLATFORM_TOLERANCE,
     compute_record,
     golden_set,
+    holds_own,
     load_record,
     record_problems,
     tolerance_of,
@@ -20,7 +21,7 @@ def check_record(part: str, minimum_size: int) -> None:
     directory, own = golden_set()
     expected = load_record(directory, part)
     assert len(expected) >= minimum_size
-    problems, how = record_problems(part, expected, compute_record(part), own)
+    problems, how = record_problems(part, expected, compute_record(part), holds_own(directory, own, part))
     assert not problems, f"{part} compared with {directory} {how}:\n" + "\n".join(problems[:30])
 
 
@@ -35,6 +36,13 @@ def test_reproduction_equals_its_golden_file():
 @pytest.mark.slow
 def test_evaluation_of_the_shipped_policies_equals_its_golden_file():
     check_record("evaluate", minimum_size=2)
+
+
+def test_a_record_a_platform_set_leaves_out_is_compared_as_the_reference_sets(tmp_path):
+    (tmp_path / "evaluate.json").write_text("{}")
+    assert holds_own(tmp_path, True, "evaluate")
+    assert not holds_own(tmp_path, True, "reproduce")  # read from the reference set: tolerances after the bits
+    assert not holds_own(tmp_path, False, "evaluate")
 
 
 def test_the_cross_platform_comparison_still_catches_changed_results():
