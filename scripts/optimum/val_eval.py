@@ -9,6 +9,8 @@ deterministic policy, in the env built with the policy keywords of its config, a
 * ViewTracking: ``mean_or`` = mean episode OR over validation ``static`` ids 0-31 + ``random`` ids 0-31;
   ``coverage`` = % of validation ``pan_tilt`` ids 0-4095 whose final OR is above the coverage threshold (0.8),
   the proxy for the test-only 21 x 21 coverage grid.
+* ViewTracking ``--selection``: the coverage proxy on pan_tilt ids 4096-5119 only (disjoint from the reported
+  ids), to choose among checkpoints; written to ``val_view_selection.jsonl``.
 * OcclusionAvoidance: ``mean_voi`` over validation ``hold`` ids 0-31 + ``random`` ids 0-31; ``hold_voi`` over
   the hold tasks; ``headroom`` = (base - method) / (base - optimum) on the hold tasks, with the base (projected
   gradient, zero residual) measured here on the same tasks and the optimum the validation hold optimum of
@@ -22,6 +24,7 @@ Each measurement appends one JSON line to ``<root>/results/val_<env>.jsonl`` and
     python scripts/optimum/val_eval.py --tag shipped continuum_gym/agents/policies/ViewTracking-v0/*dimension*
     python scripts/optimum/val_eval.py --base ContinuumGym/OcclusionAvoidance-v0
     python scripts/optimum/val_eval.py --pending occ_s2   # the finished runs of runs/occ_s2/ not yet scored
+    python scripts/optimum/val_eval.py --selection --tag vt_s3_lin6m RUN/checkpoints/step_*/model.zip RUN
 """
 
 from __future__ import annotations
@@ -40,16 +43,19 @@ VIEW, OCC = "ContinuumGym/ViewTracking-v0", "ContinuumGym/OcclusionAvoidance-v0"
 # (task, number of ids from 0) per env: the protocol's non-grid task sets that have validation instances,
 # and the coverage proxy.
 TASKS = {VIEW: [("static", 32), ("random", 32), ("pan_tilt", 4096)], OCC: [("hold", 32), ("random", 32)]}
+# --selection (ViewTracking): coverage on validation pan_tilt ids disjoint from the reported ones, for
+# choosing a checkpoint without selecting on the ids it is then reported on.
+SELECTION = ("pan_tilt", 1024, 4096)
 
 
-def rollout(env_id: str, policy, env_kwargs: dict, task: str, count: int) -> dict:
-    """Per-episode metrics of ``policy`` (None: the zero residual, i.e. the base) on validation ids 0..count-1."""
+def rollout(env_id: str, policy, env_kwargs: dict, task: str, count: int, first: int = 0) -> dict:
+    """Per-episode metrics of ``policy`` (None: the zero residual, i.e. the base) on validation ids first..first+count-1."""
     from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
 
     core = make_core(env_id, count, **dict(env_kwargs, task=task, task_split=SPLIT))
     if policy is None:
         policy = ZeroResidual(core.single_action_space.shape[0])
-    return run_episodes(core, policy, np.arange(count))
+    return run_episodes(core, policy, np.arange(first, first + count))
 
 
 def hold_optimum() -> float:
@@ -63,11 +69,17 @@ def hold_optimum() -> float:
     return float(np.mean(np.asarray(cache[ref.cache_key][ref.values], dtype=float)[:32]))
 
 
-def measure(env_id: str, policy, env_kwargs: dict) -> tuple[dict, dict]:
-    """(summary, per-task arrays) of one policy on the env's validation task sets."""
+def measure(env_id: str, policy, env_kwargs: dict, selection: bool = False) -> tuple[dict, dict]:
+    """(summary, per-task arrays) of one policy on the env's validation task sets (or on ``SELECTION``)."""
     from continuum_gym.envs.spec import get_spec
 
     spec = get_spec(env_id)
+    if selection:
+        task, count, first = SELECTION
+        coverage = spec.metric("coverage_percent")
+        final = rollout(env_id, policy, env_kwargs, task, count, first)[coverage.grid_metric]
+        return ({"selection_coverage": float(100.0 * np.mean(final > coverage.threshold)),
+                 "selection_ids": f"{task} {first}-{first + count - 1}"}, {"selection_final_or": final})
     per = {task: rollout(env_id, policy, env_kwargs, task, count) for task, count in TASKS[env_id]}
     arrays = {}
     if env_id == VIEW:
@@ -138,6 +150,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("targets", nargs="*", type=Path, help="run directories or checkpoint model.zip files")
     parser.add_argument("--tag", default="", help="label recorded with each result (e.g. the config tag)")
     parser.add_argument("--base", default=None, help="score the analytic base (zero residual) of this env id")
+    parser.add_argument("--selection", action="store_true",
+                        help="ViewTracking only: coverage on pan_tilt ids 4096-5119 (disjoint from the reported "
+                        "0-4095), to <root>/results/val_view_selection.jsonl")
     parser.add_argument("--pending", default=None, metavar="TAG",
                         help="also score every finished run of <root>/runs/TAG/ that has no final result yet")
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
@@ -160,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
             env_id = config["env_id"]
             kwargs = policy_env_kwargs(get_spec(env_id), config)
             name = run.name
-        summary, arrays = measure(env_id, model, kwargs)
+        if args.selection and env_id != VIEW:
+            raise SystemExit(f"--selection is defined for {VIEW} only")
+        summary, arrays = measure(env_id, model, kwargs, args.selection)
         if env_id == OCC:
             ref = occ_reference(args.root)
             summary["headroom"] = (ref["base_hold_voi"] - summary["hold_voi"]) / (ref["base_hold_voi"] -
@@ -171,10 +188,10 @@ def main(argv: list[str] | None = None) -> int:
                   "run": str(run) if run else None, "seed": int(seed.group(1)) if seed else None, "step": step,
                   **summary, "eval_s": round(time.time() - start, 1),
                   "at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-        short = "view" if env_id == VIEW else "occ"
+        short = ("view" if env_id == VIEW else "occ") + ("_selection" if args.selection else "")
         with open(args.root / "results" / f"val_{short}.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
-        suffix = f"_step{step}" if step is not None else ""
+        suffix = (f"_step{step}" if step is not None else "") + ("_selection" if args.selection else "")
         np.savez(args.root / "results" / "arrays" / f"{args.tag or 'x'}_{name}{suffix}.npz", **arrays)
         print(json.dumps(record), flush=True)
     return 0
