@@ -9,8 +9,10 @@ A run that was stopped before its end ships its newest verified checkpoint
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
+import zipfile
 from pathlib import Path
 
 import yaml
@@ -23,8 +25,11 @@ DEST = Path(__file__).resolve().parents[1] / "continuum_gym" / "agents" / "polic
 def ship(run: Path, dest: Path) -> Path:
     config = yaml.safe_load((run / "config.yml").read_text())
     model = run / "model.zip"
-    source, steps = "model.zip", config.get("total_timesteps")
-    if not model.exists():
+    source, steps = "model.zip", None
+    if model.exists():  # the steps the model was trained for (a whole number of rollouts past the budget)
+        with zipfile.ZipFile(model) as archive:
+            steps = int(json.loads(archive.read("data"))["num_timesteps"])
+    else:
         unit, _ = find_resumable(run / CHECKPOINTS)
         if unit is None:
             raise FileNotFoundError(f"{run}: neither model.zip nor a verified checkpoint")
