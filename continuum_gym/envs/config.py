@@ -243,11 +243,13 @@ class EnvConfig:
         return "\n".join(rows)
 
 
-def check_common(config: EnvConfig, tasks: tuple, test_only: tuple) -> None:
+def check_common(config: EnvConfig) -> None:
+    """The keywords every env shares, checked against the config's own task families (``builtin_tasks``)."""
     from continuum_gym.envs import registered
     from continuum_gym.envs.task_sources import resolve_task
 
     set_ = object.__setattr__
+    tasks, test_only = config.builtin_tasks, config.test_only_tasks
     if isinstance(config.task, str) and config.task not in tasks and (
             ":" in config.task or config.task in registered.TASKS[config.env_id]):
         set_(config, "task", registered.resolve("task", config.env_id, config.task))

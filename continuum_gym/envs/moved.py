@@ -7,6 +7,7 @@ looks the name up here and imports it from its new home.
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from typing import Any
 
 OCCLUSION = "continuum_gym.envs.occlusion"
@@ -17,8 +18,8 @@ MOVED: dict[str, dict[str, str]] = {
     "continuum_gym.envs.spec": {"OCCLUSION_SPEC": f"{OCCLUSION}.spec:SPEC", "VIEW_SPEC": f"{VIEW}.spec:SPEC"},
     "continuum_gym.envs.config": {
         "OcclusionConfig": f"{OCCLUSION}.config:OcclusionConfig", "ViewTrackingConfig": f"{VIEW}.config:ViewTrackingConfig",
-        "OCCLUSION_TASKS": f"{OCCLUSION}.tasks:TASKS", "OCCLUSION_TEST_ONLY": f"{OCCLUSION}.tasks:TEST_ONLY",
-        "VIEW_TASKS": f"{VIEW}.tasks:TASKS", "VIEW_TEST_ONLY": f"{VIEW}.tasks:TEST_ONLY",
+        "OCCLUSION_TASKS": f"{OCCLUSION}.config:TASKS", "OCCLUSION_TEST_ONLY": f"{OCCLUSION}.config:TEST_ONLY",
+        "VIEW_TASKS": f"{VIEW}.config:TASKS", "VIEW_TEST_ONLY": f"{VIEW}.config:TEST_ONLY",
         "MAX_GRID": f"{VIEW}.config:MAX_GRID",
     },
     "continuum_gym.envs.tasks": {
@@ -46,4 +47,14 @@ def moved(module: str, name: str) -> Any:
     return getattr(importlib.import_module(new_module), new_name)
 
 
-__all__ = ["MOVED", "moved"]
+def lazy_exports(package: str, exports: dict[str, str]) -> Callable[[str], Any]:
+    """A package's module ``__getattr__``: ``name`` from its submodule ``exports[name]``, imported on first use."""
+    def __getattr__(name: str) -> Any:
+        if name in exports:
+            return getattr(importlib.import_module(f"{package}.{exports[name]}"), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return __getattr__
+
+
+__all__ = ["MOVED", "moved", "lazy_exports"]

@@ -38,4 +38,4 @@ class ReachConfig(EnvConfig):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "robot", resolve_robot(self.robot, ContinuumEndoscope, self.env_id))
-        check_common(self, self.builtin_tasks, self.test_only_tasks)
+        check_common(self)

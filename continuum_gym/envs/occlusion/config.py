@@ -21,7 +21,6 @@ from continuum_gym.validation import choice, describe, fraction
 #: in ``tasks.py`` so that the config (and ``continuum-gym --help``) does not import the task generators.
 TASKS = ("hold", "circle", "random", "mixed")
 TEST_ONLY = ("circle",)
-OCCLUSION_TASKS, OCCLUSION_TEST_ONLY = TASKS, TEST_ONLY
 
 if TYPE_CHECKING:
     from continuum_gym.baselines.occlusion import OcclusionLimits
@@ -40,8 +39,8 @@ class OcclusionConfig(EnvConfig):
     object_keywords: ClassVar[tuple] = ("robot", "cone", "model_error")
     task_module: ClassVar[str] = "continuum_gym.envs.occlusion.tasks"
     trajectory_class: ClassVar[str] = "continuum_gym.envs.trajectories:TipTrajectory"
-    builtin_tasks: ClassVar[tuple] = OCCLUSION_TASKS
-    test_only_tasks: ClassVar[tuple] = OCCLUSION_TEST_ONLY
+    builtin_tasks: ClassVar[tuple] = TASKS
+    test_only_tasks: ClassVar[tuple] = TEST_ONLY
 
     task: Any = field(default="hold", metadata=spec(
         doc="`hold` (hold a paper-like start pose), `random` (smooth random tip trajectories, <= 12 mm), `mixed` "
@@ -109,7 +108,7 @@ class OcclusionConfig(EnvConfig):
             set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
         assert self.cone is not None  # set just above when it was not given (mypy does not see object.__setattr__)
         set_(self, "lens_model", self.cone.lens_model)
-        check_common(self, OCCLUSION_TASKS, OCCLUSION_TEST_ONLY)
+        check_common(self)
         check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
         if self.visibility_guard is not None:
@@ -133,4 +132,4 @@ class OcclusionConfig(EnvConfig):
                                gamma_rate=self.gamma_rate)
 
 
-__all__ = ["OcclusionConfig", "OCCLUSION_TASKS", "OCCLUSION_TEST_ONLY"]
+__all__ = ["OcclusionConfig", "TASKS", "TEST_ONLY"]

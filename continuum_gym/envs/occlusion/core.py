@@ -21,7 +21,7 @@ from continuum_gym.envs.info import (
     attribute,
     bits,
     column,
-    fields_table,
+    env_docstring,
 )
 from continuum_gym.envs.occlusion.config import OcclusionConfig
 from continuum_gym.envs.occlusion.kernel import (
@@ -198,7 +198,7 @@ class OcclusionCore(BatchedCore):
                 "v_des": v, "dt": self.control_dt / self.substeps, "robot": self.robot, "cone": self.cone}
 
 
-_DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotating angled-lens endoscope.
+_DOC = env_docstring("""The multi-backbone continuum robot of Sarli & Simaan beside the rotating angled-lens endoscope.
 
     ## Description
     A 3-segment multi-backbone continuum robot with insertion (7 DoF) leaves its channel 4.47 mm beside
@@ -290,8 +290,7 @@ _DOC = """The multi-backbone continuum robot of Sarli & Simaan beside the rotati
       tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
       reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
       takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
-    """.replace("{info}", fields_table(INFO_FIELDS)).replace(
-    "{arguments}", "\n".join("    " + line for line in OcclusionConfig.arguments_table().splitlines()))
+    """, INFO_FIELDS, OcclusionConfig)
 
 
 class OcclusionAvoidanceEnv(ContinuumEnv):

@@ -7,8 +7,7 @@ ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER 
 first use, so importing the package registers the id without compiling anything.
 """
 
-import importlib
-
+from continuum_gym.envs.moved import lazy_exports
 from continuum_gym.envs.view_tracking.spec import SPEC
 
 _EXPORTS = {
@@ -20,8 +19,4 @@ _EXPORTS = {
 }
 __all__ = ["SPEC", *sorted(_EXPORTS)]
 
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

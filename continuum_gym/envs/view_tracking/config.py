@@ -21,7 +21,6 @@ from continuum_gym.validation import boolean, choice, describe, integer, number
 #: here rather than in ``tasks.py`` so that the config (and ``continuum-gym --help``) does not import the generators.
 TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
 TEST_ONLY = ("case1", "case2", "coverage")
-VIEW_TASKS, VIEW_TEST_ONLY = TASKS, TEST_ONLY
 
 #: Largest coverage grid (points per axis).
 MAX_GRID = 401
@@ -40,8 +39,8 @@ class ViewTrackingConfig(EnvConfig):
     object_keywords: ClassVar[tuple] = ("robot", "davinci", "model_error")
     task_module: ClassVar[str] = "continuum_gym.envs.view_tracking.tasks"
     trajectory_class: ClassVar[str] = "continuum_gym.envs.trajectories:DaVinciTrajectory"
-    builtin_tasks: ClassVar[tuple] = VIEW_TASKS
-    test_only_tasks: ClassVar[tuple] = VIEW_TEST_ONLY
+    builtin_tasks: ClassVar[tuple] = TASKS
+    test_only_tasks: ClassVar[tuple] = TEST_ONLY
 
     task: Any = field(default="random", metadata=spec(
         doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "
@@ -90,7 +89,7 @@ class ViewTrackingConfig(EnvConfig):
             set_(self, "davinci", DaVinciEndoscope())
         elif not isinstance(self.davinci, DaVinciEndoscope):
             raise ValueError(f"davinci must be a DaVinciEndoscope or None; got {describe(self.davinci)}")
-        check_common(self, VIEW_TASKS, VIEW_TEST_ONLY)
+        check_common(self)
         check_model_error(self, "view", 2)
         choice(self.residual_space, self.residual_spaces, "residual_space")
         if self.residual_space == "target" and self.base_controller is None:
@@ -114,4 +113,4 @@ class ViewTrackingConfig(EnvConfig):
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
 
 
-__all__ = ["ViewTrackingConfig", "VIEW_TASKS", "VIEW_TEST_ONLY"]
+__all__ = ["ViewTrackingConfig", "TASKS", "TEST_ONLY", "MAX_GRID"]

@@ -16,7 +16,7 @@ from continuum_gym.envs.batched import (
     step_threads,
 )
 from continuum_gym.envs.common_kernels import task_arrays
-from continuum_gym.envs.info import InfoField, attribute, bits, column, fields_table
+from continuum_gym.envs.info import InfoField, attribute, bits, column, env_docstring
 from continuum_gym.envs.single import ContinuumEnv
 from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.vector import ContinuumVectorEnv
@@ -173,7 +173,7 @@ class ViewTrackingCore(BatchedCore):
         return {"q": self.measured_joints(row), "p_target": p, "R_target": R, "dt": self.control_dt, "robot": self.robot}
 
 
-_DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a moving da Vinci 30-degree view.
+_DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. reproducing a moving da Vinci 30-degree view.
 
     ## Description
     A 6-DoF continuum endoscope (stem insertion L0, stem rotation phi, two bending segments) must place
@@ -258,8 +258,7 @@ _DOC = """The 2-segment continuum endoscope of Deng, Xu et al. reproducing a mov
       tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
       reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
       takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
-    """.replace("{info}", fields_table(INFO_FIELDS)).replace(
-    "{arguments}", "\n".join("    " + line for line in ViewTrackingConfig.arguments_table().splitlines()))
+    """, INFO_FIELDS, ViewTrackingConfig)
 
 
 class ViewTrackingEnv(ContinuumEnv):
