@@ -21,9 +21,10 @@ Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):
 - ViewTracking controller: ``rates(q (6,), p_target (3,), R_target (3, 3), dt, robot, params (m,), out (6,))
   -> None``; ``robot`` is ``ContinuumEndoscope.kernel_args()``.
 - Reward term (compiled): ``term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,),
-  params (m,)) -> float64``, with the env's metric and flag columns (``METRIC_*``, ``FLAG_*`` of its kernel
-  module) and the joint rates the robot applied over the step (base and residual, after rate and joint
-  limits; the action's index layout). ``term(metrics, flags, action, params)`` (no rates) works too.
+  params (m,)) -> float64``, with the env's metric and flag columns (``Metric.*``, ``Flag.*`` of its
+  ``outputs`` module; ``METRIC_*``, ``FLAG_*`` of its kernel module still work) and the joint rates the
+  robot applied over the step (base and residual, after rate and joint limits; the action's index layout).
+  ``term(metrics, flags, action, params)`` (no rates) works too.
 - Reward term (numpy, ``compiled=False``): ``fn(metrics: dict[str, (N,) array], actions (N, k), rates (N, k))
   -> (N,)`` (``rates`` optional), metrics named as in ``info``; applied once per batch step.
 

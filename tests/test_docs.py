@@ -94,18 +94,20 @@ def test_the_variant_tutorials_shell_blocks_run_as_written(tmp_path):
 
 
 def test_the_column_table_of_the_extension_tutorial_names_every_kernel_column():
-    """The metric and flag columns a reward term reads are the kernels' constants: the table lists each once."""
+    """The metric and flag columns a reward term reads are the envs' declarations: the table lists each once,
+    in column order, and the flat names of earlier releases still import from the kernel modules."""
     import importlib
 
     text = (ROOT / "docs" / "tutorials" / "extend.md").read_text()
-    rows = {"OcclusionAvoidance": "continuum_gym.envs.occlusion.kernel",
-            "ViewTracking": "continuum_gym.envs.view_tracking.kernel"}
-    for env, module_name in rows.items():
+    rows = {"OcclusionAvoidance": "continuum_gym.envs.occlusion", "ViewTracking": "continuum_gym.envs.view_tracking"}
+    for env, package in rows.items():
         line = next(line for line in text.splitlines() if line.startswith(f"| {env} ("))
         _, metrics_cell, flags_cell = line.strip("|").split(" | ")
-        module = importlib.import_module(module_name)
-        for prefix, cell, count in (("METRIC_", metrics_cell, module.N_METRICS), ("FLAG_", flags_cell, module.N_FLAGS)):
-            declared = {name[len(prefix):]: value for name, value in vars(module).items()
-                        if name.startswith(prefix) and isinstance(value, int)}
-            assert sorted(declared.values()) == list(range(count)), f"{module_name}: {prefix}* columns"
-            assert re.findall(r"`([A-Z_]+)`", cell) == sorted(declared, key=declared.get), f"{env} {prefix}* table"
+        outputs = importlib.import_module(package + ".outputs")
+        kernel = importlib.import_module(package + ".kernel")
+        for prefix, cell, columns in (("METRIC_", metrics_cell, outputs.Metric), ("FLAG_", flags_cell, outputs.Flag)):
+            assert [int(c) for c in columns] == list(range(len(columns)))
+            assert re.findall(r"`([A-Z_]+)`", cell) == list(columns.names()), f"{env} {prefix}* table"
+            for c in columns:
+                assert getattr(kernel, prefix + c.name) == int(c), f"{package}.kernel.{prefix}{c.name}"
+            assert getattr(kernel, f"N_{prefix.rstrip('_')}S") == len(columns)

@@ -35,7 +35,7 @@ class Column:
     """Reader of column ``index`` of the core's (N, k) array ``attribute`` (as ``kind``: float or bool)."""
 
     def __init__(self, attribute: str, index: int, kind: type = float) -> None:
-        self.attribute, self.index, self.kind = attribute, index, kind
+        self.attribute, self.index, self.kind = attribute, int(index), kind
 
     def __call__(self, core) -> np.ndarray:
         values = getattr(core, self.attribute)[:, self.index]
@@ -54,7 +54,7 @@ class Bits:
     """Reader of a per-joint bit mask stored in column ``index`` of ``attribute``: (N, dof) bools."""
 
     def __init__(self, attribute: str, index: int) -> None:
-        self.attribute, self.index = attribute, index
+        self.attribute, self.index = attribute, int(index)
 
     def __call__(self, core) -> np.ndarray:
         return _bits_of(getattr(core, self.attribute)[:, self.index], core.dof)
@@ -98,7 +98,7 @@ class AtMost:
     """Reader of ``attribute[:, index] <= bound`` (bools)."""
 
     def __init__(self, attribute: str, index: int, bound: float) -> None:
-        self.attribute, self.index, self.bound = attribute, index, bound
+        self.attribute, self.index, self.bound = attribute, int(index), bound
 
     def __call__(self, core) -> np.ndarray:
         return getattr(core, self.attribute)[:, self.index] <= self.bound
@@ -221,11 +221,13 @@ def fields_table(fields: Sequence[InfoField]) -> str:
     return "\n".join(f"    - ``{f.name}``: {f.doc}" for f in fields)
 
 
-def env_docstring(template: str, fields: Sequence[InfoField], config_class: Any) -> str:
-    """An env's docstring: ``{info}`` filled with the table of its info fields and ``{arguments}`` with its
-    config's keyword table (``EnvConfig.arguments_table``), indented as the docstring is."""
+def env_docstring(template: str, fields: Sequence[InfoField], config_class: Any, observation: str = "") -> str:
+    """An env's docstring: ``{info}`` filled with the table of its info fields, ``{arguments}`` with its
+    config's keyword table (``EnvConfig.arguments_table``), indented as the docstring is, and
+    ``{observation}`` with ``observation`` (its layout's ``Layout.table``)."""
     arguments = "\n".join("    " + line for line in config_class.arguments_table().splitlines())
-    return template.replace("{info}", fields_table(fields)).replace("{arguments}", arguments)
+    return template.replace("{info}", fields_table(fields)).replace("{arguments}", arguments) \
+        .replace("{observation}", observation)
 
 
 class RewardTerms(np.ndarray):

@@ -14,7 +14,7 @@ from gymnasium.envs.registration import register, registry
 from numba import njit
 
 from continuum_gym.envs import TipTrajectory
-from continuum_gym.envs.occlusion.kernel import FLAG_TERMINATED, METRIC_TIP_ERROR
+from continuum_gym.envs.occlusion.outputs import Flag, Metric
 from continuum_gym.geometry import LensCone
 from continuum_gym.registry import register_controller, register_reward_term, register_robot, register_task
 from continuum_gym.robots import MultiBackboneRobot
@@ -41,7 +41,7 @@ def damped_least_squares(q, gamma, p_des, R_des, v_des, dt, robot, cone, params,
 @njit(cache=True)  # compiled once, reused by every process that imports this module
 def tip_error_mm(metrics, flags, action, rates, params):
     """Minus the tip error in mm, and a penalty when the episode ends on a lost tip."""
-    return -1e3 * metrics[METRIC_TIP_ERROR] - params[0] * flags[FLAG_TERMINATED]
+    return -1e3 * metrics[Metric.TIP_ERROR] - params[0] * flags[Flag.TERMINATED]
 
 
 def figure_eight(task_id, split, rng):

@@ -19,15 +19,12 @@ from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.vector import ContinuumVectorEnv
 from my_reach.config import ReachConfig
 from my_reach.kernel import (
-    FLAG_CLAMPED,
-    FLAG_TERMINATED,
-    FLAG_TRUNCATED,
-    METRIC_DISTANCE,
-    N_FLAGS,
-    N_METRICS,
     OBS_DIM,
     OBS_LIMIT,
+    OBSERVATION,
     REWARD_TERMS,
+    Flag,
+    Metric,
     ReachOutputs,
     ReachParams,
     ReachState,
@@ -39,9 +36,9 @@ from my_reach.spec import SPEC
 ACTION_SCALE = np.array([0.05, math.pi / 4, math.pi / 4, math.pi / 2, math.pi / 4, math.pi / 2])
 
 INFO_FIELDS = (
-    InfoField("distance_m", column("metrics", METRIC_DISTANCE), float, "distance of the view's target point "
+    InfoField("distance_m", column("metrics", Metric.DISTANCE), float, "distance of the view's target point "
               "from the goal (m)"),
-    InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a limit (6,)"),
+    InfoField("clamped_joints", bits("flags", Flag.CLAMPED), None, "joints clamped at a limit (6,)"),
     InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
     InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
 )
@@ -53,10 +50,10 @@ class ReachCore(BatchedCore):
     spec = SPEC
     config_class = ReachConfig
     step_kernel = staticmethod(reach_step_batch)
-    terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
+    terminated_flag, truncated_flag = Flag.TERMINATED, Flag.TRUNCATED
     builtin_reward_names = REWARD_TERMS
     info_fields = INFO_FIELDS
-    metric_columns = {"distance_m": METRIC_DISTANCE}
+    metric_columns = {"distance_m": Metric.DISTANCE}
     circular_joint_columns = (1, 3, 5)
     dof = 6
 
@@ -76,7 +73,7 @@ class ReachCore(BatchedCore):
         self._setup_rewards()
         self.q, self.steps, self.limit = np.zeros((n, 6)), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
         self.obs, self.base_cmd = np.zeros((n, OBS_DIM)), np.zeros((n, 6))
-        self.metrics, self.flags = np.zeros((n, N_METRICS)), np.zeros((n, N_FLAGS), dtype=np.int64)
+        self.metrics, self.flags = np.zeros((n, len(Metric))), np.zeros((n, len(Flag)), dtype=np.int64)
         self.terms, self.rewards = np.zeros((n, len(self.reward_names))), np.zeros(n)
         self.num_threads = step_threads(num_threads)
         self.row_threads = row_threads(n, self.num_threads, self.parallel_min_rows)
@@ -99,7 +96,7 @@ class ReachCore(BatchedCore):
         self.observe_rows(rows)
 
     def step_values(self) -> dict:
-        return {"distance": self.metrics[:, METRIC_DISTANCE]}
+        return {"distance": self.metrics[:, Metric.DISTANCE]}
 
     def controller_observation(self, row: int = 0) -> dict:
         goal, _ = self.desired(row, self.steps[row] * self.control_dt)
@@ -107,7 +104,13 @@ class ReachCore(BatchedCore):
 
 
 class EndoscopeReachEnv(ContinuumEnv):
-    """The continuum endoscope points its view at a goal point (a toy third environment; see ``my_reach``)."""
+    __doc__ = f"""The continuum endoscope points its view at a goal point (a toy third environment; see ``my_reach``).
+
+    ## Observation Space
+    ``Box(-10, 10, ({OBS_DIM},), float32)``, each entry clipped to +-10:
+
+{OBSERVATION.table()}
+    """
 
     core_class = ReachCore
     metadata = {"render_modes": [], "render_fps": 100}  # no pybullet scene (``EnvSpec.scene``) for this toy

@@ -12,18 +12,42 @@ from collections import namedtuple
 
 import numpy as np
 
+from continuum_gym.envs.columns import Block, Columns, Layout
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope_kernels import endoscope_kinematics, make_endoscope_workspace
 
-# Columns of ``metrics`` and ``flags`` (the core's ``info`` and the evaluation read them by these names).
-METRIC_DISTANCE = 0
-N_METRICS = 1
-FLAG_CLAMPED, FLAG_TERMINATED, FLAG_TRUNCATED = 0, 1, 2
-N_FLAGS = 3
+
+class Metric(Columns):
+    """Columns of ``metrics``: the kernel writes ``metrics[i, Metric.DISTANCE]``, ``info`` reads it."""
+
+    DISTANCE = "distance of the view's target point from the goal (m)"
+
+
+class Flag(Columns):
+    """Columns of ``flags``."""
+
+    CLAMPED = "joint bits clamped at a limit"
+    TERMINATED = "the distance is not finite"
+    TRUNCATED = "the task's duration is over"
+
+
+#: The observation, declared once: the kernel indexes it by block (``OBS.goal_error``), the docs table it.
+OBSERVATION = Layout(
+    "ReachObservation",
+    Block("l0", "L0", "/ 0.05 m, minus 1"),
+    Block("phi", "phi", "/ pi"),
+    Block("theta1", "theta1", "rad"),
+    Block("delta1", "sin delta1, cos delta1", "-", size=2),
+    Block("theta2", "theta2", "rad"),
+    Block("delta2", "sin delta2, cos delta2", "-", size=2),
+    Block("goal_error", "goal - target point (world)", "/ 0.05 m", size=3),
+    Block("base_command", "Jacobian-transpose command", "/ action scale", size=6),
+)
+OBS = OBSERVATION.starts()
+OBS_DIM = OBSERVATION.width()
 REWARD_TERMS = ("distance", "action")
-OBS_DIM = 17  # 8 joint features, 3 goal error, 6 base command
 OBS_LIMIT = 10.0
 GAIN = 20.0  #: Jacobian-transpose gain (1/s per m of error, per m of Jacobian)
 
@@ -66,14 +90,14 @@ def reach_step_batch(state, actions, active, tasks, robot, env, custom, out, cla
             distance = base_rates(q, state.steps[i] * env.control_dt, i, tasks, robot, ws, p_cam, R, p_ct, J, goal,
                                   goal_rate, env, cmd)
             observe(i, q, p_ct, goal, cmd, env, out)
-            out.metrics[i, METRIC_DISTANCE] = distance
+            out.metrics[i, Metric.DISTANCE] = distance
             if mode != OBSERVE_ONLY:
                 out.terms[i, 0] = -env.weights[0] * distance / 0.01
                 out.terms[i, 1] = -env.weights[1] * action_sq / 6.0
                 out.rewards[i] = out.terms[i, 0] + out.terms[i, 1]
-                out.flags[i, FLAG_CLAMPED] = clamped
-                out.flags[i, FLAG_TERMINATED] = 0 if math.isfinite(distance) else 1
-                out.flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+                out.flags[i, Flag.CLAMPED] = clamped
+                out.flags[i, Flag.TERMINATED] = 0 if math.isfinite(distance) else 1
+                out.flags[i, Flag.TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
         first, last = next_rows(claims, start, stop, first, last)
 
 
@@ -97,17 +121,17 @@ def base_rates(q, t, i, tasks, robot, ws, p_cam, R, p_ct, J, goal, goal_rate, en
 def observe(i, q, p_ct, goal, cmd, env, out):
     """Row i's observation: joint features, goal error / 5 cm, base command / action scale (clipped to +-10)."""
     o = out.obs[i]
-    o[0] = q[0] / 0.05 - 1.0
-    o[1] = q[1] / math.pi
-    o[2] = q[2]
-    o[3] = math.sin(q[3])
-    o[4] = math.cos(q[3])
-    o[5] = q[4]
-    o[6] = math.sin(q[5])
-    o[7] = math.cos(q[5])
+    o[OBS.l0] = q[0] / 0.05 - 1.0
+    o[OBS.phi] = q[1] / math.pi
+    o[OBS.theta1] = q[2]
+    o[OBS.delta1] = math.sin(q[3])
+    o[OBS.delta1 + 1] = math.cos(q[3])
+    o[OBS.theta2] = q[4]
+    o[OBS.delta2] = math.sin(q[5])
+    o[OBS.delta2 + 1] = math.cos(q[5])
     for a in range(3):
-        o[8 + a] = (goal[a] - p_ct[a]) / 0.05
+        o[OBS.goal_error + a] = (goal[a] - p_ct[a]) / 0.05
     for k in range(6):
-        o[11 + k] = cmd[k] / env.action_scale[k]
+        o[OBS.base_command + k] = cmd[k] / env.action_scale[k]
         out.base_cmd[i, k] = cmd[k]
     clip_observation(o, OBS_LIMIT)

@@ -13,6 +13,7 @@ from continuum_gym.envs.occlusion.spec import SPEC
 _EXPORTS = {
     "OcclusionAvoidanceEnv": "core", "OcclusionAvoidanceVectorEnv": "core", "OcclusionCore": "core",
     "INFO_FIELDS": "core", "OcclusionConfig": "config", "OcclusionAvoidanceGoalEnv": "goal",
+    "Metric": "outputs", "Flag": "outputs", "OBSERVATION": "outputs",
     "REWARD_TERMS": "kernel", "METRIC_VOI": "kernel", "METRIC_TIP_ERROR": "kernel",
     "METRIC_ORIENTATION_ERROR": "kernel", "METRIC_VIEW_FRACTION": "kernel", "FLAG_TERMINATED": "kernel",
     "FLAG_TRUNCATED": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_GUARDED": "kernel",

@@ -25,20 +25,6 @@ from continuum_gym.envs.info import (
 )
 from continuum_gym.envs.occlusion.config import OcclusionConfig
 from continuum_gym.envs.occlusion.kernel import (
-    FLAG_BASE_FROZEN,
-    FLAG_BASE_SATURATED,
-    FLAG_CLAMPED,
-    FLAG_GAMMA_SATURATED,
-    FLAG_GUARDED,
-    FLAG_RATE_SATURATED,
-    FLAG_TERMINATED,
-    FLAG_TRUNCATED,
-    METRIC_ORIENTATION_ERROR,
-    METRIC_TIP_ERROR,
-    METRIC_VIEW_FRACTION,
-    METRIC_VOI,
-    N_FLAGS,
-    N_METRICS,
     OBS_LIMIT,
     REWARD_TERMS,
     OcclusionOutputs,
@@ -47,6 +33,7 @@ from continuum_gym.envs.occlusion.kernel import (
     observation_dim,
     occlusion_step_batch,
 )
+from continuum_gym.envs.occlusion.outputs import OBSERVATION, Flag, Metric
 from continuum_gym.envs.occlusion.spec import SPEC as OCCLUSION_SPEC
 from continuum_gym.envs.occlusion.tasks import VISIBILITY_FRACTION
 from continuum_gym.envs.single import ContinuumEnv
@@ -58,25 +45,25 @@ if TYPE_CHECKING:
 
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
 INFO_FIELDS = (
-    InfoField("voi", column("metrics", METRIC_VOI), float, "Visual Occlusion Index (eq 27) at the new state"),
-    InfoField("tip_error_m", column("metrics", METRIC_TIP_ERROR), float, "tip position error (m)"),
-    InfoField("orientation_error_rad", column("metrics", METRIC_ORIENTATION_ERROR), float,
+    InfoField("voi", column("metrics", Metric.VOI), float, "Visual Occlusion Index (eq 27) at the new state"),
+    InfoField("tip_error_m", column("metrics", Metric.TIP_ERROR), float, "tip position error (m)"),
+    InfoField("orientation_error_rad", column("metrics", Metric.ORIENTATION_ERROR), float,
               "tip orientation error (rad)"),
-    InfoField("tip_view_fraction", column("metrics", METRIC_VIEW_FRACTION), float,
+    InfoField("tip_view_fraction", column("metrics", Metric.VIEW_FRACTION), float,
               "tip angle from the view axis / cone half-angle"),
-    InfoField("tip_in_view", AtMost("metrics", METRIC_VIEW_FRACTION, VISIBILITY_FRACTION), bool,
+    InfoField("tip_in_view", AtMost("metrics", Metric.VIEW_FRACTION, VISIBILITY_FRACTION), bool,
               "tip within 0.7 of the half-angle"),
     InfoField("gamma", attribute("gamma"), float, "endoscope rotation (rad)"),
-    InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a position limit (dof,)"),
-    InfoField("rate_saturated", column("flags", FLAG_RATE_SATURATED, bool), bool,
+    InfoField("clamped_joints", bits("flags", Flag.CLAMPED), None, "joints clamped at a position limit (dof,)"),
+    InfoField("rate_saturated", column("flags", Flag.RATE_SATURATED, bool), bool,
               "joint rates scaled down to the rate limits"),
-    InfoField("gamma_rate_saturated", column("flags", FLAG_GAMMA_SATURATED, bool), bool,
+    InfoField("gamma_rate_saturated", column("flags", Flag.GAMMA_SATURATED, bool), bool,
               "endoscope rate clipped to its limit"),
-    InfoField("base_frozen_joints", bits("flags", FLAG_BASE_FROZEN), None,
+    InfoField("base_frozen_joints", bits("flags", Flag.BASE_FROZEN), None,
               "joints the baseline froze at a limit during the step (dof,)"),
-    InfoField("base_rate_saturated", column("flags", FLAG_BASE_SATURATED, bool), bool,
+    InfoField("base_rate_saturated", column("flags", Flag.BASE_SATURATED, bool), bool,
               "the baseline's rates were scaled down"),
-    InfoField("visibility_guarded", column("flags", FLAG_GUARDED, bool), bool,
+    InfoField("visibility_guarded", column("flags", Flag.GUARDED, bool), bool,
               "the visibility guard cut the residual's endoscope rotation"),
     InfoField("base_command", attribute("base_cmd"), None, "the baseline's command at the new state (dof + 1,)"),
     InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
@@ -91,11 +78,11 @@ class OcclusionCore(BatchedCore):
     config_class = OcclusionConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(occlusion_step_batch)
-    terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
+    terminated_flag, truncated_flag = Flag.TERMINATED, Flag.TRUNCATED
     supports_pixel_occlusion = True
     info_fields = INFO_FIELDS
-    metric_columns = {"voi": METRIC_VOI, "tip_error_m": METRIC_TIP_ERROR,
-                      "orientation_error_rad": METRIC_ORIENTATION_ERROR, "tip_view_fraction": METRIC_VIEW_FRACTION}
+    metric_columns = {"voi": Metric.VOI, "tip_error_m": Metric.TIP_ERROR,
+                      "orientation_error_rad": Metric.ORIENTATION_ERROR, "tip_view_fraction": Metric.VIEW_FRACTION}
 
     def __init__(self, num_envs: int = 1, config: OcclusionConfig | None = None, num_threads: int | None = None,
                  **kwargs: Any) -> None:
@@ -135,11 +122,11 @@ class OcclusionCore(BatchedCore):
         self.obs = np.zeros((n, obs_dim))
         self.base_cmd = np.zeros((n, dof + 1))
         self.base_info = np.zeros((n, 2), dtype=np.int64)
-        self.metrics = np.zeros((n, N_METRICS))
+        self.metrics = np.zeros((n, len(Metric)))
         self.terms = np.zeros((n, len(self.reward_names)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
-        self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
+        self.flags = np.zeros((n, len(Flag)), dtype=np.int64)
         self.num_threads = step_threads(num_threads)
         self.row_threads = row_threads(n, self.num_threads, self.parallel_min_rows)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
@@ -184,11 +171,11 @@ class OcclusionCore(BatchedCore):
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``OCCLUSION_SPEC.episode_metrics``)."""
-        return {"voi": self.metrics[:, METRIC_VOI],
-                "in_view": (self.metrics[:, METRIC_VIEW_FRACTION] <= VISIBILITY_FRACTION) * 1.0,
-                "tip_error": self.metrics[:, METRIC_TIP_ERROR],
-                "orientation_error": self.metrics[:, METRIC_ORIENTATION_ERROR],
-                "guarded": (self.flags[:, FLAG_GUARDED] != 0) * 1.0}
+        return {"voi": self.metrics[:, Metric.VOI],
+                "in_view": (self.metrics[:, Metric.VIEW_FRACTION] <= VISIBILITY_FRACTION) * 1.0,
+                "tip_error": self.metrics[:, Metric.TIP_ERROR],
+                "orientation_error": self.metrics[:, Metric.ORIENTATION_ERROR],
+                "guarded": (self.flags[:, Flag.GUARDED] != 0) * 1.0}
 
     def controller_observation(self, row: int = 0) -> dict:
         """The dict observation an analytic controller's ``predict`` reads, for one row."""
@@ -235,19 +222,7 @@ _DOC = env_docstring("""The multi-backbone continuum robot of Sarli & Simaan bes
     ## Observation Space
     ``Box(-10, 10, (32,), float32)``, each entry clipped to +-10:
 
-    | Num | Observation | Scale |
-    |-----|-------------|-------|
-    | 0-2 | bend pi/2 - theta_j | / max_bend |
-    | 3-8 | sin delta_j, cos delta_j (j = 1..3, interleaved) | - |
-    | 9 | insertion | mapped to [-1, 1] over the insertion range |
-    | 10-11 | sin gamma, cos gamma | - |
-    | 12-14 | tip position error p_des - p (world) | / 0.01 m |
-    | 15-17 | tip orientation error log(R_des R^T) | / 0.1 rad |
-    | 18-20 | desired tip velocity (feed-forward) | / 0.05 m/s |
-    | 21 | tip angle from the view axis | / cone half-angle |
-    | 22 | VOI (eq 27, paper-notes §1.3 item 13) | - |
-    | 23-30 | baseline command at this state (the next substep's) | / rate limits |
-    | 31 | elapsed time | / task duration |
+{observation}
 
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``):
@@ -290,7 +265,7 @@ _DOC = env_docstring("""The multi-backbone continuum robot of Sarli & Simaan bes
       tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
       reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
       takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
-    """, INFO_FIELDS, OcclusionConfig)
+    """, INFO_FIELDS, OcclusionConfig, OBSERVATION.table(3))
 
 
 class OcclusionAvoidanceEnv(ContinuumEnv):

@@ -9,8 +9,9 @@ observation and the reward terms.
 
 Every kernel takes a few named bundles: the batch ``OcclusionState`` (q, gamma, step counters),
 the ``TaskArrays``, the robot's and the controller's ``kernel_args`` bundles, the env's
-``OcclusionStepParams`` and the ``OcclusionOutputs`` it fills. Columns of ``metrics`` and ``flags``
-have names (``METRIC_*``, ``FLAG_*``).
+``OcclusionStepParams`` and the ``OcclusionOutputs`` it fills. The observation's layout and the
+columns of ``metrics``, ``flags`` and ``base_info`` are declared once, in ``outputs`` (``OBS``,
+``Metric``, ``Flag``, ``BaseInfo``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from continuum_gym.baselines.occlusion_kernels import (
     occlusion_rates_kernel,
     wrap_angle,
 )
+from continuum_gym.envs.columns import at, legacy_names
 from continuum_gym.envs.common_kernels import (
     OBSERVE_ONLY,
     clamp,
@@ -33,6 +35,16 @@ from continuum_gym.envs.common_kernels import (
     desired_rotation,
 )
 from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
+from continuum_gym.envs.occlusion.outputs import (
+    OBS,
+    OBSERVATION,
+    ORIENTATION_ERROR_SCALE,
+    POSITION_ERROR_SCALE,
+    VELOCITY_SCALE,
+    BaseInfo,
+    Flag,
+    Metric,
+)
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
@@ -42,10 +54,6 @@ from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
 
 OBS_LIMIT = 10.0
-# Observation scales (documented in the env docstring).
-POSITION_ERROR_SCALE = 0.01  # m
-ORIENTATION_ERROR_SCALE = 0.1  # rad
-VELOCITY_SCALE = 0.05  # m/s
 NULLSPACE_DAMPING = 1e-12  # m², numerically exact projector away from singularities
 VOI_SAMPLES_PER_SEGMENT = 40
 # Reward terms, in this order everywhere.
@@ -55,18 +63,6 @@ N_TERMS_REWARD = len(REWARD_TERMS)
 MAX_TIP_ERROR = 0.01  # m
 # Share of the residual kept by the visibility guard, resolved to 2^-20.
 GUARD_BISECTIONS = 20
-
-#: Columns of ``metrics``.
-METRIC_VOI, METRIC_TIP_ERROR, METRIC_ORIENTATION_ERROR, METRIC_VIEW_FRACTION = range(4)
-N_METRICS = 4
-#: Columns of ``flags``: joint bits clamped at a position limit; joint rates scaled down; gamma rate
-#: clipped; terminated; truncated; joint bits the baseline froze (OR over the substeps); baseline rates
-#: scaled down; visibility guard cut the residual's endoscope rotation.
-(FLAG_CLAMPED, FLAG_RATE_SATURATED, FLAG_GAMMA_SATURATED, FLAG_TERMINATED, FLAG_TRUNCATED, FLAG_BASE_FROZEN,
- FLAG_BASE_SATURATED, FLAG_GUARDED) = range(8)
-N_FLAGS = 8
-#: Columns of ``base_info``: joint bits the cached baseline command froze, and whether its rates were scaled.
-BASE_FROZEN, BASE_SATURATED = range(2)
 
 #: Per-row state of the batch: configurations (N, dof), endoscope rotations (N,) in rad, control steps (N,).
 OcclusionState = namedtuple("OcclusionState", ["q", "gamma", "steps"])
@@ -89,7 +85,7 @@ OcclusionStepWork = namedtuple("OcclusionStepWork", ["ws", "scratch", "qdot", "r
 
 def observation_dim(n_segments: int) -> int:
     """Length of an observation row for a robot of ``n_segments`` (32 for the paper's three)."""
-    return 5 * n_segments + 17
+    return OBSERVATION.width(n_segments)
 
 
 @kernel
@@ -163,54 +159,58 @@ def cache_base_command(i, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm, en
             tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
             base_cmd[i, k] = work.full_cmd[k]
-        out.base_info[i, BASE_FROZEN] = 0
-        out.base_info[i, BASE_SATURATED] = 0
+        out.base_info[i, BaseInfo.FROZEN] = 0
+        out.base_info[i, BaseInfo.SATURATED] = 0
     elif env.has_base:
         gd, frozen, scale = occlusion_rates_kernel(qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm,
                                                    work.ws, scratch, qdot)
         for k in range(dof):
             base_cmd[i, k] = qdot[k]
         base_cmd[i, dof] = gd
-        out.base_info[i, BASE_FROZEN] = frozen
-        out.base_info[i, BASE_SATURATED] = 1 if scale < 1.0 else 0
+        out.base_info[i, BaseInfo.FROZEN] = frozen
+        out.base_info[i, BaseInfo.SATURATED] = 1 if scale < 1.0 else 0
     else:
         if tip_at_qc:
             tip_kernel(qc, robot, work.ws, scratch.p, scratch.R, scratch.J)
         for k in range(dof + 1):
             base_cmd[i, k] = 0.0
-        out.base_info[i, BASE_FROZEN] = 0
-        out.base_info[i, BASE_SATURATED] = 0
+        out.base_info[i, BaseInfo.FROZEN] = 0
+        out.base_info[i, BaseInfo.SATURATED] = 0
 
 
 @kernel(inline="always")
 def occlusion_observation(o, i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
                           base_cmd):
-    """Row i's observation into o (layout: ``occlusion_observe``) from the joints q, gamma, the tip position error
-    (e_p0, e_p1, e_p2) and orientation error e_w, the view fraction, the VOI and the cached baseline command."""
+    """Row i's observation into o (layout: ``outputs.OBSERVATION``) from the joints q, gamma, the tip
+    position error (e_p0, e_p1, e_p2) and orientation error e_w, the view fraction, the VOI and the cached
+    baseline command."""
     dof = q.shape[0]
     control_dt = env.control_dt
+    bend, delta = at(OBS.bend, n), at(OBS.delta, n)
     for j in range(n):
-        o[j] = (0.5 * math.pi - q[2 * j]) / env.max_bend
-        o[n + 2 * j] = math.sin(q[2 * j + 1])
-        o[n + 1 + 2 * j] = math.cos(q[2 * j + 1])
-    ins = 2 * n
-    at = 3 * n
+        o[bend + j] = (0.5 * math.pi - q[2 * j]) / env.max_bend
+        o[delta + 2 * j] = math.sin(q[2 * j + 1])
+        o[delta + 1 + 2 * j] = math.cos(q[2 * j + 1])
+    ins = 2 * n  # the insertion joint
     span = env.upper[ins] - env.lower[ins]
-    o[at] = 2.0 * (q[ins] - env.lower[ins]) / span - 1.0 if math.isfinite(span) else q[ins] / 0.02
-    o[at + 1] = math.sin(gamma)
-    o[at + 2] = math.cos(gamma)
-    o[at + 3] = e_p0 / POSITION_ERROR_SCALE
-    o[at + 4] = e_p1 / POSITION_ERROR_SCALE
-    o[at + 5] = e_p2 / POSITION_ERROR_SCALE
+    o[at(OBS.insertion, n)] = 2.0 * (q[ins] - env.lower[ins]) / span - 1.0 if math.isfinite(span) else q[ins] / 0.02
+    o[at(OBS.gamma, n)] = math.sin(gamma)
+    o[at(OBS.gamma, n) + 1] = math.cos(gamma)
+    e_p = at(OBS.tip_position_error, n)
+    o[e_p] = e_p0 / POSITION_ERROR_SCALE
+    o[e_p + 1] = e_p1 / POSITION_ERROR_SCALE
+    o[e_p + 2] = e_p2 / POSITION_ERROR_SCALE
+    e_r, v = at(OBS.tip_orientation_error, n), at(OBS.desired_velocity, n)
     for a in range(3):
-        o[at + 6 + a] = e_w[a] / ORIENTATION_ERROR_SCALE
-        o[at + 9 + a] = v_des[a] / VELOCITY_SCALE
-    o[at + 12] = view_fraction
-    o[at + 13] = voi
+        o[e_r + a] = e_w[a] / ORIENTATION_ERROR_SCALE
+        o[v + a] = v_des[a] / VELOCITY_SCALE
+    o[at(OBS.view_fraction, n)] = view_fraction
+    o[at(OBS.voi, n)] = voi
     rate_scale_vec = env.rate_scale_vec
+    base = at(OBS.base_command, n)
     for k in range(dof + 1):
-        o[at + 14 + k] = base_cmd[i, k] / rate_scale_vec[k]
-    o[at + 15 + dof] = t / (tasks.duration[i] * control_dt)
+        o[base + k] = base_cmd[i, k] / rate_scale_vec[k]
+    o[at(OBS.time, n)] = t / (tasks.duration[i] * control_dt)
     clip_observation(o, OBS_LIMIT)
 
 
@@ -218,9 +218,7 @@ def occlusion_observation(o, i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_
 def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     """Geometry at the state of row i: next baseline command (cached), observation and metrics.
 
-    Observation layout for n segments (see the env docstring): bends (n), sin/cos delta (2n),
-    insertion, sin/cos gamma, tip position / orientation errors, desired velocity, view fraction,
-    VOI, baseline command (dof + 1), elapsed time.
+    The observation's layout is declared once, in ``outputs.OBSERVATION`` (and tabled in the env docstring).
     """
     q = state.q[i]
     gamma = state.gamma[i]
@@ -249,10 +247,10 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
                                         work.lens, work.dr)
     view_fraction = view_fraction_at(p, gamma, prm.cone)
     metrics = out.metrics
-    metrics[i, METRIC_VOI] = voi
-    metrics[i, METRIC_TIP_ERROR] = tip_error
-    metrics[i, METRIC_ORIENTATION_ERROR] = ori_error
-    metrics[i, METRIC_VIEW_FRACTION] = view_fraction
+    metrics[i, Metric.VOI] = voi
+    metrics[i, Metric.TIP_ERROR] = tip_error
+    metrics[i, Metric.ORIENTATION_ERROR] = ori_error
+    metrics[i, Metric.VIEW_FRACTION] = view_fraction
     occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
                           base_cmd)
 
@@ -279,12 +277,16 @@ def residual_rates(i, actions, env, rate_scale_vec, dof, residual):
 
 @kernel(inline="always")
 def substep_base_rates(i, s, t, dt, qc, gamma, tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen,
-                       base_saturated, ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J):
+                       base_saturated):
     """The baseline's joint rates of substep s at the controller's joints qc into qdot (the cached command
     for s == 0), and the tip Jacobian at qc where the residual is projected.
 
     Returns (the baseline's endoscope rate, base_frozen, base_saturated), the two ORed with this substep's.
+    Its callers borrow (no reference counts), so reading the scratch arrays from ``work`` costs nothing.
     """
+    ws, scratch, qdot, p_des, v_des = work.ws, work.scratch, work.qdot, work.p_des, work.v_des
+    tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
+    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
     dof = qdot.shape[0]
     if s == 0:
         for k in range(dof):
@@ -362,23 +364,23 @@ def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rat
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
-    voi = metrics[i, METRIC_VOI]
-    over = metrics[i, METRIC_VIEW_FRACTION] - env.visibility_fraction
+    voi = metrics[i, Metric.VOI]
+    over = metrics[i, Metric.VIEW_FRACTION] - env.visibility_fraction
     terms[i, 0] = -weights[0] * voi
-    terms[i, 1] = -weights[1] * metrics[i, METRIC_TIP_ERROR] / 0.001
-    terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR] / 0.01
+    terms[i, 1] = -weights[1] * metrics[i, Metric.TIP_ERROR] / 0.001
+    terms[i, 2] = -weights[2] * metrics[i, Metric.ORIENTATION_ERROR] / 0.01
     terms[i, 3] = -weights[3] * (over / (1.0 - env.visibility_fraction) if over > 0.0 else 0.0)
     terms[i, 4] = -weights[4] * action_sq / (dof + 1)
     flags = out.flags
-    tip_error = metrics[i, METRIC_TIP_ERROR]
-    flags[i, FLAG_CLAMPED] = clamped
-    flags[i, FLAG_RATE_SATURATED] = rate_saturated
-    flags[i, FLAG_GAMMA_SATURATED] = gamma_saturated
-    flags[i, FLAG_TERMINATED] = 1 if (tip_error > MAX_TIP_ERROR or not math.isfinite(tip_error)) else 0
-    flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
-    flags[i, FLAG_BASE_FROZEN] = base_frozen
-    flags[i, FLAG_BASE_SATURATED] = base_saturated
-    flags[i, FLAG_GUARDED] = guarded
+    tip_error = metrics[i, Metric.TIP_ERROR]
+    flags[i, Flag.CLAMPED] = clamped
+    flags[i, Flag.RATE_SATURATED] = rate_saturated
+    flags[i, Flag.GAMMA_SATURATED] = gamma_saturated
+    flags[i, Flag.TERMINATED] = 1 if (tip_error > MAX_TIP_ERROR or not math.isfinite(tip_error)) else 0
+    flags[i, Flag.TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+    flags[i, Flag.BASE_FROZEN] = base_frozen
+    flags[i, Flag.BASE_SATURATED] = base_saturated
+    flags[i, Flag.GUARDED] = guarded
     total = 0.0
     for k in range(N_TERMS_REWARD):
         total += terms[i, k]
@@ -395,11 +397,7 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, w
     """
     ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
         work.cmd
-    p_des, v_des = work.p_des, work.v_des
-    # Arrays of the bundles that the substep loop reads are taken into locals once: each read of a
-    # bundle's array is an atomic reference count in a kernel that calls another (see mbcr_kernels).
     tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
-    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
     rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
     G = state.gamma
     dof = state.q.shape[1]
@@ -409,15 +407,14 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, w
     rate_saturated = 0
     gamma_saturated = 0
     guarded = 0
-    base_frozen = out.base_info[i, BASE_FROZEN]
-    base_saturated = out.base_info[i, BASE_SATURATED]
+    base_frozen = out.base_info[i, BaseInfo.FROZEN]
+    base_saturated = out.base_info[i, BaseInfo.SATURATED]
     base_cmd = out.base_cmd
     action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
     for s in range(env.substeps):
         t = state.steps[i] * env.control_dt + s * dt
         gd, base_frozen, base_saturated = substep_base_rates(
-            i, s, t, dt, q, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen, base_saturated,
-            ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J)
+            i, s, t, dt, q, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen, base_saturated)
         scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
         if scale < 1.0:
             rate_saturated = 1
@@ -461,5 +458,9 @@ def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom,
         first, last = next_rows(claims, start, stop, first, last)
 
 
-__all__ = ["occlusion_step_batch", "REWARD_TERMS",
+#: The flat column names of earlier releases (``METRIC_VOI``, ``FLAG_TERMINATED``, ``N_METRICS``, ...), still
+#: importable from here for users' compiled reward terms.
+__getattr__ = legacy_names(__name__, METRIC_=Metric, FLAG_=Flag)
+
+__all__ = ["occlusion_step_batch", "REWARD_TERMS", "Metric", "Flag", "BaseInfo", "OBSERVATION",
            "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]

@@ -31,12 +31,6 @@ from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, desired_point
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.occlusion.kernel import (
-    BASE_FROZEN,
-    BASE_SATURATED,
-    METRIC_ORIENTATION_ERROR,
-    METRIC_TIP_ERROR,
-    METRIC_VIEW_FRACTION,
-    METRIC_VOI,
     VOI_SAMPLES_PER_SEGMENT,
     cache_base_command,
     endoscope_rate,
@@ -49,6 +43,7 @@ from continuum_gym.envs.occlusion.kernel import (
     substep_base_rates,
     view_fraction_at,
 )
+from continuum_gym.envs.occlusion.outputs import BaseInfo, Metric
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.lens_cone import ConeKernelArgs, lens_to_world_direction, to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
@@ -129,13 +124,13 @@ def mismatch_observe(i, state, tasks, robot, true_robot, prm, true_cone, env, cu
     e_p1 = p_des[1] - p[1]
     e_p2 = p_des[2] - p[2]
     metrics = out.metrics
-    metrics[i, METRIC_TIP_ERROR] = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
-    metrics[i, METRIC_ORIENTATION_ERROR] = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
+    metrics[i, Metric.TIP_ERROR] = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
+    metrics[i, Metric.ORIENTATION_ERROR] = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
     voi, _, _, _ = voi_of_configuration(q, true_robot, work.ws, gamma, true_cone, VOI_SAMPLES_PER_SEGMENT,
                                         work.points, work.lens, work.dr)
     view_fraction = view_fraction_at(p, gamma, true_cone)
-    metrics[i, METRIC_VOI] = voi
-    metrics[i, METRIC_VIEW_FRACTION] = view_fraction
+    metrics[i, Metric.VOI] = voi
+    metrics[i, Metric.VIEW_FRACTION] = view_fraction
     # what the system measures: the observation
     seen_tip(i, gamma, prm.cone, true_cone, me, mw)
     ps = mw.p_seen
@@ -155,9 +150,7 @@ def mismatch_step_row(i, state, actions, tasks, robot, true_robot, prm, true_con
     """``occlusion_step_row`` with the nominal controller at the measured joints driving the true plant."""
     ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
         work.cmd
-    p_des, v_des = work.p_des, work.v_des
     tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
-    w, w_rate, turn, R_goal = work.w, work.w_rate, work.turn, work.R_goal
     rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
     G = state.gamma
     dof = state.q.shape[1]
@@ -173,8 +166,8 @@ def mismatch_step_row(i, state, actions, tasks, robot, true_robot, prm, true_con
     rate_saturated = 0
     gamma_saturated = 0
     guarded = 0
-    base_frozen = out.base_info[i, BASE_FROZEN]
-    base_saturated = out.base_info[i, BASE_SATURATED]
+    base_frozen = out.base_info[i, BaseInfo.FROZEN]
+    base_saturated = out.base_info[i, BaseInfo.SATURATED]
     base_cmd = out.base_cmd
     action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
     for s in range(substeps):
@@ -183,7 +176,7 @@ def mismatch_step_row(i, state, actions, tasks, robot, true_robot, prm, true_con
             measure(me, i, state.steps[i] * substeps + s, dof - 1)
         gd, base_frozen, base_saturated = substep_base_rates(
             i, s, t, dt, qm, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen,
-            base_saturated, ws, scratch, qdot, p_des, v_des, w, w_rate, turn, R_goal, tip_p, tip_R, tip_J)
+            base_saturated)
         scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
         if scale < 1.0:
             rate_saturated = 1

@@ -13,6 +13,7 @@ from continuum_gym.envs.view_tracking.spec import SPEC
 _EXPORTS = {
     "ViewTrackingEnv": "core", "ViewTrackingVectorEnv": "core", "ViewTrackingCore": "core", "INFO_FIELDS": "core",
     "ACTION_SCALE": "core", "ViewTrackingConfig": "config", "ViewTrackingGoalEnv": "goal",
+    "Metric": "outputs", "Flag": "outputs", "OBSERVATION": "outputs",
     "REWARD_TERMS": "kernel", "METRIC_OR": "kernel", "METRIC_POSITION_ERROR": "kernel",
     "METRIC_ORIENTATION_ERROR": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_RATE_SATURATED": "kernel",
     "FLAG_TERMINATED": "kernel", "FLAG_TRUNCATED": "kernel",

@@ -23,26 +23,16 @@ from continuum_gym.envs.vector import ContinuumVectorEnv
 from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
 from continuum_gym.envs.view_tracking.kernel import (
     ACTION_DIM,
-    FLAG_CLAMPED,
-    FLAG_RATE_SATURATED,
-    FLAG_TERMINATED,
-    FLAG_TRUNCATED,
-    METRIC_OR,
-    METRIC_ORIENTATION_ERROR,
-    METRIC_POSITION_ERROR,
-    N_FLAGS,
-    N_METRICS,
-    OBS_DIM,
     OBS_LIMIT,
     OVERLAP_BONUS_THRESHOLD,
     REWARD_TERMS,
-    TARGET_OBS_DIM,
     TARGET_SHIFT_SCALE,
     ViewOutputs,
     ViewState,
     ViewStepParams,
     view_step_batch,
 )
+from continuum_gym.envs.view_tracking.outputs import OBS_DIM, OBSERVATION, TARGET_OBS_DIM, Flag, Metric
 from continuum_gym.envs.view_tracking.spec import SPEC as VIEW_SPEC
 from continuum_gym.geometry.frustum import Frustum
 
@@ -54,14 +44,14 @@ ACTION_SCALE = np.array([0.1, math.pi / 2, math.pi / 2, math.pi, math.pi / 2, ma
 
 #: ``info`` of every step, for the single env (one row) and the vector env (arrays) alike.
 INFO_FIELDS = (
-    InfoField("overlap_ratio", column("metrics", METRIC_OR), float,
+    InfoField("overlap_ratio", column("metrics", Metric.OR), float,
               "exact overlap ratio of the two view frustums at the new state"),
-    InfoField("position_error_m", column("metrics", METRIC_POSITION_ERROR), float,
+    InfoField("position_error_m", column("metrics", Metric.POSITION_ERROR), float,
               "distance of the target point from the da Vinci's (m)"),
-    InfoField("orientation_error_rad", column("metrics", METRIC_ORIENTATION_ERROR), float,
+    InfoField("orientation_error_rad", column("metrics", Metric.ORIENTATION_ERROR), float,
               "orientation error of the camera frame (rad)"),
-    InfoField("clamped_joints", bits("flags", FLAG_CLAMPED), None, "joints clamped at a limit (6,)"),
-    InfoField("rate_saturated", column("flags", FLAG_RATE_SATURATED, bool), bool,
+    InfoField("clamped_joints", bits("flags", Flag.CLAMPED), None, "joints clamped at a limit (6,)"),
+    InfoField("rate_saturated", column("flags", Flag.RATE_SATURATED, bool), bool,
               "joint rates scaled down to ``rate_limits``"),
     InfoField("base_command", attribute("base_cmd"), None, "the baseline's joint rates at the new state (6,)"),
     InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
@@ -76,7 +66,7 @@ class ViewTrackingCore(BatchedCore):
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(view_step_batch)
-    terminated_flag, truncated_flag = FLAG_TERMINATED, FLAG_TRUNCATED
+    terminated_flag, truncated_flag = Flag.TERMINATED, Flag.TRUNCATED
     # A row costs ~3 us: at N = 64 waking a second thread costs more than it saves (benchmarks/batch.py times
     # one thread against all cores); from N = 128 it pays.
     parallel_min_rows = 128
@@ -84,8 +74,8 @@ class ViewTrackingCore(BatchedCore):
     # both cores write, and a call of the row loop, to every ~3 us row.
     claim_block = 8
     info_fields = INFO_FIELDS
-    metric_columns = {"overlap_ratio": METRIC_OR, "position_error_m": METRIC_POSITION_ERROR,
-                      "orientation_error_rad": METRIC_ORIENTATION_ERROR}
+    metric_columns = {"overlap_ratio": Metric.OR, "position_error_m": Metric.POSITION_ERROR,
+                      "orientation_error_rad": Metric.ORIENTATION_ERROR}
     dof = ACTION_DIM
 
     def __init__(self, num_envs: int = 1, config: ViewTrackingConfig | None = None, num_threads: int | None = None,
@@ -123,13 +113,13 @@ class ViewTrackingCore(BatchedCore):
         self.steps = np.zeros(n, dtype=np.int64)
         self.obs = np.zeros((n, obs_dim))
         self.base_cmd = np.zeros((n, ACTION_DIM))
-        self.metrics = np.zeros((n, N_METRICS))
+        self.metrics = np.zeros((n, len(Metric)))
         self.terms = np.zeros((n, len(self.reward_names)))
         self.rewards = np.zeros(n)
         self.limit = np.zeros(n, dtype=np.int64)
         self.num_threads = step_threads(num_threads)
         self.row_threads = row_threads(n, self.num_threads, self.parallel_min_rows)
-        self.flags = np.zeros((n, N_FLAGS), dtype=np.int64)
+        self.flags = np.zeros((n, len(Flag)), dtype=np.int64)
         self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
         has_base = self.base_controller is not None
         self._state = ViewState(self.q, self.steps)
@@ -158,9 +148,9 @@ class ViewTrackingCore(BatchedCore):
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``VIEW_SPEC.episode_metrics``)."""
-        ratio = self.metrics[:, METRIC_OR]
+        ratio = self.metrics[:, Metric.OR]
         return {"or": ratio, "or_above": (ratio > OVERLAP_BONUS_THRESHOLD) * 1.0,
-                "position_error": self.metrics[:, METRIC_POSITION_ERROR]}
+                "position_error": self.metrics[:, Metric.POSITION_ERROR]}
 
     def davinci_configuration(self, row: int = 0) -> np.ndarray:
         """q_davinci [L_dV (m), yaw, pitch, roll] of the target at the row's current time (clipped to its ranges)."""
@@ -201,22 +191,7 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
     ## Observation Space
     ``Box(-10, 10, (22,), float32)`` (27 with ``observe_target=True``), each entry clipped to +-10:
 
-    | Num | Observation | Scale |
-    |-----|-------------|-------|
-    | 0 | L0 | mapped to [-1, 1] over [0, 0.1] m |
-    | 1 | phi | / pi |
-    | 2 | theta1 | mapped to [-1, 1] over [0, pi/4] |
-    | 3-4 | sin delta1, cos delta1 | - |
-    | 5 | theta2 | mapped to [-1, 1] over [0, pi/2] |
-    | 6-7 | sin delta2, cos delta2 | - |
-    | 8-10 | target point error p_dVt - p_ct (world) | / 0.05 m |
-    | 11-13 | orientation error log(R_dVt R_ct^T) | rad |
-    | 14 | overlap ratio | - |
-    | 15-20 | baseline command at this state | / action scale |
-    | 21 | elapsed time | / task duration |
-    | 22 | da Vinci insertion L_dV (only with ``observe_target``) | (L_dV - 0.05 m) / 0.05 m |
-    | 23-24 | da Vinci yaw, pitch (only with ``observe_target``) | / (pi/3) |
-    | 25-26 | sin, cos of the da Vinci roll (only with ``observe_target``) | - |
+{observation}
 
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``): ``overlap`` = +w OR;
@@ -258,7 +233,7 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
       tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
       reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
       takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
-    """, INFO_FIELDS, ViewTrackingConfig)
+    """, INFO_FIELDS, ViewTrackingConfig, OBSERVATION.table())
 
 
 class ViewTrackingEnv(ContinuumEnv):

@@ -7,8 +7,8 @@ baseline command, the observation and the reward terms at the new state.
 
 Kernels take named bundles: ``ViewState`` (q, step counters), ``TaskArrays`` (the da Vinci trajectory
 of each row), the robot's, the controller's, the da Vinci's and the frustum's ``kernel_args``, the
-env's ``ViewStepParams`` and the ``ViewOutputs`` they fill. Columns of ``metrics`` and ``flags`` have
-names (``METRIC_*``, ``FLAG_*``).
+env's ``ViewStepParams`` and the ``ViewOutputs`` they fill. The observation's layout and the columns of
+``metrics`` and ``flags`` are declared once, in ``outputs`` (``OBS``, ``Metric``, ``Flag``).
 """
 
 from __future__ import annotations
@@ -24,9 +24,11 @@ from continuum_gym.baselines.view_tracking import (
     view_errors,
     view_rates_kernel,
 )
+from continuum_gym.envs.columns import legacy_names
 from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.envs.view_tracking.controller import view_slot_rates
+from continuum_gym.envs.view_tracking.outputs import OBS, OBS_DIM, POSITION_ERROR_SCALE, Flag, Metric
 from continuum_gym.geometry.overlap import make_overlap_work
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
@@ -34,11 +36,7 @@ from continuum_gym.robots.davinci import davinci_pose
 from continuum_gym.robots.rotations import rotation_exp
 
 ACTION_DIM = 6
-OBS_DIM = 22
-#: Extra entries with ``observe_target``: the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll].
-TARGET_OBS_DIM = 5
 OBS_LIMIT = 10.0
-POSITION_ERROR_SCALE = 0.05  # m
 #: Target-space residual at action 1.0 (times residual_scale): shift of the target point (m) and rotation of
 #: the target frame (rad), both in {w}.
 TARGET_SHIFT_SCALE = np.array([0.02, 0.5])
@@ -47,12 +45,6 @@ REWARD_TERMS = ("overlap", "position", "orientation", "action", "overlap_bonus")
 OVERLAP_BONUS_THRESHOLD = 0.8
 N_REWARD_TERMS = len(REWARD_TERMS)
 
-#: Columns of ``metrics``: overlap ratio, target-point error (m), orientation error (rad).
-METRIC_OR, METRIC_POSITION_ERROR, METRIC_ORIENTATION_ERROR = range(3)
-N_METRICS = 3
-#: Columns of ``flags``: joint bits clamped at a limit, rates scaled to the rate limits, terminated, truncated.
-FLAG_CLAMPED, FLAG_RATE_SATURATED, FLAG_TERMINATED, FLAG_TRUNCATED = range(4)
-N_FLAGS = 4
 
 #: Per-row state: configurations (N, 6) and control steps (N,).
 ViewState = namedtuple("ViewState", ["q", "steps"])
@@ -73,27 +65,27 @@ def view_observation(o, i, t, q, p_tgt, p_tip, e_w, ratio, q_dv, tasks, prm, dv,
     error e_w, overlap ratio, the cached baseline command, time (and the da Vinci's q_dv with observe_target)."""
     control_dt = env.control_dt
     lower, upper, action_scale = prm.lower, prm.upper, env.action_scale
-    o[0] = 2.0 * (q[0] - lower[0]) / (upper[0] - lower[0]) - 1.0
-    o[1] = q[1] / math.pi
-    o[2] = 2.0 * (q[2] - lower[2]) / (upper[2] - lower[2]) - 1.0
-    o[3] = math.sin(q[3])
-    o[4] = math.cos(q[3])
-    o[5] = 2.0 * (q[4] - lower[4]) / (upper[4] - lower[4]) - 1.0
-    o[6] = math.sin(q[5])
-    o[7] = math.cos(q[5])
+    o[OBS.l0] = 2.0 * (q[0] - lower[0]) / (upper[0] - lower[0]) - 1.0
+    o[OBS.phi] = q[1] / math.pi
+    o[OBS.theta1] = 2.0 * (q[2] - lower[2]) / (upper[2] - lower[2]) - 1.0
+    o[OBS.delta1] = math.sin(q[3])
+    o[OBS.delta1 + 1] = math.cos(q[3])
+    o[OBS.theta2] = 2.0 * (q[4] - lower[4]) / (upper[4] - lower[4]) - 1.0
+    o[OBS.delta2] = math.sin(q[5])
+    o[OBS.delta2 + 1] = math.cos(q[5])
     for a in range(3):
-        o[8 + a] = (p_tgt[a] - p_tip[a]) / POSITION_ERROR_SCALE
-        o[11 + a] = e_w[a]
-    o[14] = ratio
+        o[OBS.target_error + a] = (p_tgt[a] - p_tip[a]) / POSITION_ERROR_SCALE
+        o[OBS.orientation_error + a] = e_w[a]
+    o[OBS.overlap] = ratio
     for k in range(6):
-        o[15 + k] = base_cmd[i, k] / action_scale[k]
-    o[21] = t / (tasks.duration[i] * control_dt)
+        o[OBS.base_command + k] = base_cmd[i, k] / action_scale[k]
+    o[OBS.time] = t / (tasks.duration[i] * control_dt)
     if o.shape[0] > OBS_DIM:  # observe_target
-        o[22] = (min(max(q_dv[0], dv.lower[0]), dv.upper[0]) - 0.05) / 0.05
-        o[23] = min(max(q_dv[1], dv.lower[1]), dv.upper[1]) / (math.pi / 3)
-        o[24] = min(max(q_dv[2], dv.lower[2]), dv.upper[2]) / (math.pi / 3)
-        o[25] = math.sin(q_dv[3])
-        o[26] = math.cos(q_dv[3])
+        o[OBS.target_insertion] = (min(max(q_dv[0], dv.lower[0]), dv.upper[0]) - 0.05) / 0.05
+        o[OBS.target_yaw_pitch] = min(max(q_dv[1], dv.lower[1]), dv.upper[1]) / (math.pi / 3)
+        o[OBS.target_yaw_pitch + 1] = min(max(q_dv[2], dv.lower[2]), dv.upper[2]) / (math.pi / 3)
+        o[OBS.target_roll] = math.sin(q_dv[3])
+        o[OBS.target_roll + 1] = math.cos(q_dv[3])
     clip_observation(o, OBS_LIMIT)
 
 
@@ -143,9 +135,9 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
     ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near,
                                  frustum.far, work.overlap)
     metrics = out.metrics
-    metrics[i, METRIC_OR] = ratio
-    metrics[i, METRIC_POSITION_ERROR] = eps_p
-    metrics[i, METRIC_ORIENTATION_ERROR] = eps_r
+    metrics[i, Metric.OR] = ratio
+    metrics[i, Metric.POSITION_ERROR] = eps_p
+    metrics[i, Metric.ORIENTATION_ERROR] = eps_r
     view_observation(out.obs[i], i, t, q, p_tgt, p_ct, e_w, ratio, q_dv, tasks, prm, dv, env, base_cmd)
 
 
@@ -238,16 +230,16 @@ def finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scal
     metrics = out.metrics
     terms = out.terms
     weights = env.weights
-    terms[i, 0] = weights[0] * metrics[i, METRIC_OR]
-    terms[i, 1] = -weights[1] * metrics[i, METRIC_POSITION_ERROR] / 0.01
-    terms[i, 2] = -weights[2] * metrics[i, METRIC_ORIENTATION_ERROR]
+    terms[i, 0] = weights[0] * metrics[i, Metric.OR]
+    terms[i, 1] = -weights[1] * metrics[i, Metric.POSITION_ERROR] / 0.01
+    terms[i, 2] = -weights[2] * metrics[i, Metric.ORIENTATION_ERROR]
     terms[i, 3] = -weights[3] * action_sq / 6.0
-    terms[i, 4] = weights[4] if metrics[i, METRIC_OR] > OVERLAP_BONUS_THRESHOLD else 0.0
+    terms[i, 4] = weights[4] if metrics[i, Metric.OR] > OVERLAP_BONUS_THRESHOLD else 0.0
     flags = out.flags
-    flags[i, FLAG_CLAMPED] = clamped
-    flags[i, FLAG_RATE_SATURATED] = 1 if scale < 1.0 else 0
-    flags[i, FLAG_TERMINATED] = 0 if math.isfinite(metrics[i, METRIC_POSITION_ERROR]) else 1
-    flags[i, FLAG_TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+    flags[i, Flag.CLAMPED] = clamped
+    flags[i, Flag.RATE_SATURATED] = 1 if scale < 1.0 else 0
+    flags[i, Flag.TERMINATED] = 0 if math.isfinite(metrics[i, Metric.POSITION_ERROR]) else 1
+    flags[i, Flag.TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
     total = 0.0
     for k in range(N_REWARD_TERMS):
         total += terms[i, k]
@@ -284,3 +276,8 @@ def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, 
         view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
         if step:
             finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
+
+
+#: The flat column names of earlier releases (``METRIC_OR``, ``FLAG_TERMINATED``, ``N_METRICS``, ...), still
+#: importable from here for users' compiled reward terms.
+__getattr__ = legacy_names(__name__, METRIC_=Metric, FLAG_=Flag)

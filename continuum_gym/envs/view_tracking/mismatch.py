@@ -27,15 +27,13 @@ from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measur
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.envs.view_tracking.kernel import (
-    METRIC_OR,
-    METRIC_ORIENTATION_ERROR,
-    METRIC_POSITION_ERROR,
     finish_view_row,
     make_view_step_work,
     target_and_base_command,
     view_command,
     view_observation,
 )
+from continuum_gym.envs.view_tracking.outputs import Metric
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope_kernels import EndoscopeKernelArgs, endoscope_kinematics
@@ -98,9 +96,9 @@ def view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, 
     e_true = mw.e_true
     orientation_error(R_dv, R_cam, scratch.work33, e_true)
     metrics = out.metrics
-    metrics[i, METRIC_OR] = ratio
-    metrics[i, METRIC_POSITION_ERROR] = math.sqrt(d0 ** 2 + d1 ** 2 + d2 ** 2)
-    metrics[i, METRIC_ORIENTATION_ERROR] = math.sqrt(e_true[0] ** 2 + e_true[1] ** 2 + e_true[2] ** 2)
+    metrics[i, Metric.OR] = ratio
+    metrics[i, Metric.POSITION_ERROR] = math.sqrt(d0 ** 2 + d1 ** 2 + d2 ** 2)
+    metrics[i, Metric.ORIENTATION_ERROR] = math.sqrt(e_true[0] ** 2 + e_true[1] ** 2 + e_true[2] ** 2)
     # what the system measures: the tracked tip (body pose, nominal mounting) and its overlap ratio
     p_seen = mw.p_seen
     for a in range(3):

@@ -1,0 +1,143 @@
+"""The columns of a step kernel's arrays, declared once: the kernels' constants and the docs' tables.
+
+A kernel writes rows of a few arrays whose columns mean something: the observation, the ``metrics`` and
+the ``flags``. Each is declared here once, with what each column holds, and both the compiled code and
+the documentation are made from that declaration, so the two cannot drift apart:
+
+* :class:`Columns`, for arrays with a fixed set of named columns (``metrics``, ``flags``): an ``IntEnum``
+  whose members are the column indices (numba compiles ``metrics[i, Metric.VOI]`` to a constant index,
+  as it would ``metrics[i, 0]``) and carry their description; ``table()`` is the docs' table.
+  ``legacy_names`` serves the flat constants of earlier releases (``METRIC_VOI``, ``N_METRICS``).
+* :class:`Layout`, for an observation made of consecutive blocks whose lengths may grow with the robot's
+  number of segments: ``offsets()`` is a namedtuple of each block's start as ``(per_segment, constant)``
+  (read in a kernel with :func:`at`; ``starts()``: plain ints when no block grows), ``width(n)`` the
+  observation's length, and ``table(n)`` the env docstring's ``| Num | Observation | Scale |`` table for ``n`` segments.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from collections.abc import Callable
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+from continuum_gym.robots.compiled import kernel
+
+
+class Columns(IntEnum):
+    """Named columns of an array, in declaration order: declare each as ``NAME = "what it holds"``.
+
+    A member is the column's index (an ``int``, usable in numpy and in compiled kernels) and carries its
+    description as ``doc``.
+    """
+
+    doc: str
+
+    def __new__(cls, doc: str) -> Columns:
+        index = len(cls.__members__)
+        member = int.__new__(cls, index)
+        member._value_ = index
+        member.doc = doc
+        return member
+
+    @classmethod
+    def table(cls, prefix: str = "") -> str:
+        """The declared columns as a markdown list ``index: `NAME` - doc``, one per line."""
+        return "\n".join(f"- {int(c)}: `{prefix}{c.name}` - {c.doc}" for c in cls)
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The members' names in column order."""
+        return tuple(c.name for c in cls)
+
+
+def legacy_names(module_name: str, **prefixed: type[Columns]) -> Callable[[str], Any]:
+    """A module ``__getattr__`` serving a declaration's columns under earlier flat names.
+
+    ``legacy_names(__name__, METRIC_=Metric)`` answers ``METRIC_VOI`` with ``Metric.VOI`` and ``N_METRICS``
+    with ``len(Metric)`` (the ``N_`` name is the prefix's plural), so ``from ...kernel import METRIC_VOI``
+    keeps working in users' reward terms.
+    """
+    flat: dict[str, int] = {}
+    for prefix, columns in prefixed.items():
+        flat.update({prefix + c.name: c for c in columns})
+        flat["N_" + prefix.rstrip("_") + "S"] = len(columns)
+
+    def __getattr__(name: str) -> int:
+        try:
+            return flat[name]
+        except KeyError:
+            raise AttributeError(f"module {module_name!r} has no attribute {name!r}") from None
+
+    __getattr__.names = tuple(flat)  # type: ignore[attr-defined]  # read by the docs test
+    return __getattr__
+
+
+@dataclass(frozen=True)
+class Block:
+    """Consecutive observation entries: ``size + per_segment * n`` of them for a robot of n segments."""
+
+    name: str
+    what: str
+    scale: str
+    size: int = 1
+    per_segment: int = 0
+
+    def length(self, n_segments: int) -> int:
+        return self.size + self.per_segment * n_segments
+
+
+class Layout:
+    """An observation row as consecutive :class:`Block`s (names are Python identifiers, unique)."""
+
+    def __init__(self, name: str, *blocks: Block) -> None:
+        names = [b.name for b in blocks]
+        if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
+            raise ValueError(f"{name}: block names must be unique identifiers; got {names}")
+        self.name = name
+        self.blocks = blocks
+
+    def offsets(self) -> Any:  # a namedtuple class made at run time: typed as Any
+        """Each block's start as ``(per_segment, constant)``: entry ``per_segment * n + constant``."""
+        per, const = 0, 0
+        starts = {}
+        for b in self.blocks:
+            starts[b.name] = (per, const)
+            per, const = per + b.per_segment, const + b.size
+        return namedtuple(self.name, list(starts))(**starts)
+
+    def starts(self) -> Any:
+        """Each block's first entry (an int) of a layout whose blocks do not grow with the robot."""
+        if any(b.per_segment for b in self.blocks):
+            raise ValueError(f"{self.name}: its blocks grow with the robot's segments; use offsets() and at()")
+        return namedtuple(self.name, [b.name for b in self.blocks])(*(c for _, c in self.offsets()))
+
+    def width(self, n_segments: int = 0, upto: str | None = None) -> int:
+        """Entries of a row (of the blocks before ``upto`` when given) for a robot of ``n_segments``."""
+        total = 0
+        for b in self.blocks:
+            if b.name == upto:
+                return total
+            total += b.length(n_segments)
+        if upto is not None:
+            raise ValueError(f"upto: {upto!r} is not a block of {self.name} ({[b.name for b in self.blocks]})")
+        return total
+
+    def table(self, n_segments: int = 0, indent: str = "    ") -> str:
+        """The markdown table ``| Num | Observation | Scale |`` of a robot of ``n_segments``."""
+        lines = ["| Num | Observation | Scale |", "|-----|-------------|-------|"]
+        start = 0
+        for b in self.blocks:
+            stop = start + b.length(n_segments) - 1
+            num = str(start) if stop == start else f"{start}-{stop}"
+            lines.append(f"| {num} | {b.what} | {b.scale} |")
+            start = stop + 1
+        return "\n".join(indent + line for line in lines)
+
+
+@kernel(inline="always")
+def at(block_start, n_segments):
+    """Index of a :class:`Layout` block's first entry (``offsets()``'s ``(per_segment, constant)``) for
+    a robot of ``n_segments``."""
+    return block_start[0] * n_segments + block_start[1]
