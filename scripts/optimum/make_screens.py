@@ -2,8 +2,12 @@
 
     python scripts/optimum/make_screens.py [TAG ...]   # default: every tag of SCREENS
 """
-import copy, sys, yaml
+import copy
+import sys
 from pathlib import Path
+
+import yaml
+
 D = Path(__file__).resolve().parent
 ENV = "ContinuumGym/OcclusionAvoidance-v0"
 base = yaml.safe_load((D / "occ_s2.yml").read_text())[ENV]
@@ -19,7 +23,8 @@ SCREENS = {
                "as a plain diagonal Gaussian)", {"use_sde": False, "sde_sample_freq": None, "policy_kwargs.log_std_init": -2.41}),
  "occ_vg80": ("env_kwargs.visibility_guard 0.69 -> 0.80 (looser guard: more room for the residual)", {"env_kwargs.visibility_guard": 0.8}),
  "occ_ep20": ("n_epochs 5 -> 20", {"n_epochs": 20}),
- "occ_ep10n128": ("n_epochs 5 -> 10 and policy_kwargs.net_arch [64, 64] -> [128, 128]", {"n_epochs": 10, "policy_kwargs.net_arch": [128, 128]}),
+ "occ_ep10n128": ("n_epochs 5 -> 10 and policy_kwargs.net_arch [64, 64] -> [128, 128]",
+                   {"n_epochs": 10, "policy_kwargs.net_arch": [128, 128]}),
  "occ_vg60": ("env_kwargs.visibility_guard 0.69 -> 0.60 (tighter guard)", {"env_kwargs.visibility_guard": 0.6}),
  "occ_act0": ("env_kwargs.reward_weights {action: 0.0} (default 0.01)", {"env_kwargs.reward_weights": {"action": 0.0}}),
  "occ_hold": ("env_kwargs.task mixed -> hold (train on hold starts only)", {"env_kwargs.task": "hold"}),
@@ -42,7 +47,8 @@ for tag in tags:
     block = apply(base, changes)
     head = (f"# Issue 38, Campaign 3 screen `{tag}` (docs/optimum-experiments.md): scripts/optimum/occ_s2.yml with only\n"
             f"# {what}. 1M steps.\n"
-            f"# Use: python scripts/optimum/run_queue.py {tag}:0 (or continuum-gym train --env {ENV} --hyperparams scripts/optimum/{tag}.yml)\n")
+            f"# Use: python scripts/optimum/run_queue.py {tag}:0 "
+            f"(or continuum-gym train --env {ENV} --hyperparams scripts/optimum/{tag}.yml)\n")
     body = yaml.safe_dump({ENV: block}, sort_keys=False, default_flow_style=None, width=120)
     (D / f"{tag}.yml").write_text(head + body)
     print(tag)
