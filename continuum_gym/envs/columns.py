@@ -70,7 +70,6 @@ def legacy_names(module_name: str, **prefixed: type[Columns]) -> Callable[[str],
         except KeyError:
             raise AttributeError(f"module {module_name!r} has no attribute {name!r}") from None
 
-    __getattr__.names = tuple(flat)  # type: ignore[attr-defined]  # read by the docs test
     return __getattr__
 
 
