@@ -155,6 +155,7 @@ ENV_NAMING = {
     "continuum_gym.render.occlusion_scene": "the OcclusionAvoidance scene (spec.scene)",
     "continuum_gym.render.view_scene": "the ViewTracking scene (spec.scene)",
     "continuum_gym.evaluation.optimum.occlusion": "the OcclusionAvoidance optimum (spec.optimum)",
+    "continuum_gym.evaluation.optimum.rate_bound": "the OcclusionAvoidance hold tasks' rate-limited bound",
     "continuum_gym.evaluation.residual_reach": "ViewTracking's residual reach study",
 }
 

@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         env_hold_test_optimum,
         hold_study,
     )
+    from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
     from continuum_gym.evaluation.optimum.view import coverage_optimum
 
     progress = not args.no_progress
@@ -101,6 +102,8 @@ def run(args: argparse.Namespace) -> int:
     if "hold" in tasks:
         results["hold"] = hold_study(n_starts, args.seed, workers=workers, progress=progress)
         results["hold_test"] = env_hold_test_optimum(args.env_hold_tasks, workers=workers, progress=progress)
+        results["hold_test_rate_bound"] = env_hold_rate_bound(args.env_hold_tasks, workers=workers,
+                                                              progress=progress)
     if "circle" in tasks:
         t0 = time.perf_counter()
         results["circle"] = circle_optimum(progress=progress)
@@ -200,6 +203,13 @@ def summary_table(results: dict) -> str:
                  f"| | self-motion only (centring gamma) median | {h['centring_gamma_median_voi']:.3f} |",
                  f"| | optimum <= PG | {100 * h['fraction_optimum_le_projected_gradient']:.0f} % of starts |",
                  f"| | wall time | {h['wall_time_s']:.0f} s |"]
+    if "hold_test" in results:
+        voi = results["hold_test"]["optimum_voi"]
+        rows.append(f"| env hold tasks ({len(voi)}, test) | optimum mean VOI | {sum(voi) / len(voi):.3f} |")
+    if "hold_test_rate_bound" in results:
+        b = results["hold_test_rate_bound"]
+        rows.append(f"| | rate-limited bound on the episode-mean VOI ({b['steps']} steps of {b['dt']:g} s) | "
+                    f"{b['mean_of_mean_voi_bound']:.3f} |")
     if "circle" in results:
         c = results["circle"]
         rows += [f"| circle | optimum mean VOI (gamma free) | {c['optimum_mean_voi']:.3f} |",
