@@ -37,6 +37,9 @@ SETTINGS = {
     "occ_prog2": {"mode": "prog", "p0": 0.2, "ramp": 300_000},
     "occ_cur": {"mode": "cur", "hard_prob": 0.5, "hard_frac": 0.25},
     "occ_ep10cur": {"mode": "cur", "hard_prob": 0.5, "hard_frac": 0.25},  # occ_ep10.yml's keys + occ_cur's curriculum
+    # Campaign 4: half the hold episodes from the starts where a trained residual stays farthest above the optimum
+    "occ_gap": {"mode": "gap", "hard_prob": 0.5},  # occ_s2.yml's keys
+    "occ_ep10gap": {"mode": "gap", "hard_prob": 0.5},  # occ_ep10.yml's keys
 }
 HOLD_TRAIN = 512  # HOLD_POOL_SIZE["train"] in envs/occlusion/tasks.py
 
@@ -66,13 +69,19 @@ def make_class(settings: dict, record: dict):
             self._on_steps = 0
             if not self._train:
                 return
-            if settings["mode"] == "cur":
+            if settings["mode"] in ("cur", "gap"):
                 assert self.env_kwargs.get("task") == "mixed", "the curriculum is written for task: mixed"
+            if settings["mode"] == "cur":
                 voi = base_hold_voi({k: v for k, v in self.env_kwargs.items()})
                 n_hard = int(round(settings["hard_frac"] * len(voi)))
                 self._hard = np.argsort(voi)[::-1][:n_hard]
                 record.update(base_train_hold_voi_mean=float(voi.mean()),
                               hard_starts_base_voi_mean=float(voi[self._hard].mean()), n_hard=n_hard)
+            if settings["mode"] == "gap":
+                gap = json.loads((ROOT / "results" / "gap_hard_starts.json").read_text())
+                self._hard = np.asarray(gap["hard_starts"], dtype=np.int64)
+                record.update(gap_source=gap["run"], n_hard=len(self._hard), hard_gap_mean=gap["hard_gap_mean"])
+            if settings["mode"] in ("cur", "gap"):
                 draw = self.core.sample_task_id
 
                 def sample(rng, _draw=draw, _hard=self._hard, _p=settings["hard_prob"]):
