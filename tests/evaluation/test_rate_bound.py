@@ -15,12 +15,14 @@ from continuum_gym.evaluation.optimum import (
     GAMMA_RESOLUTION,
     arc_travel,
     env_hold_rate_bound,
+    gamma_grid,
+    hold_arc_plan,
     hold_optimum,
     hold_rate_bound,
     trace_self_motion,
 )
 from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
-from continuum_gym.geometry import occlusion_details
+from continuum_gym.geometry import LensCone, cone_coordinates, occlusion_details
 from continuum_gym.robots import MultiBackboneRobot
 
 OCC = "ContinuumGym/OcclusionAvoidance-v0"
@@ -134,6 +136,42 @@ def test_optimum_cli_reports_the_bound_of_the_env_hold_tasks(tmp_path, capsys):
     test_starts = np.asarray(hold_start_pool("test", float(lim.max_bend), tuple(lim.insertion)))[:2]
     direct = [hold_rate_bound(MultiBackboneRobot(), q0)["mean_voi_bound"] for q0 in test_starts]
     np.testing.assert_allclose(bound["mean_voi_bound"], direct, rtol=1e-12)
-    # the bound on the episode mean lies above the configuration optimum of the same tasks
+    # the bound on the episode mean lies above the configuration optimum of the same tasks, the plan above it
     assert np.all(np.asarray(bound["mean_voi_bound"]) > np.asarray(out["hold_test"]["optimum_voi"]))
+    assert np.all(np.asarray(bound["mean_voi_plan"]) >= np.asarray(bound["mean_voi_bound"]))
     assert f"{np.mean(direct):.3f}" in capsys.readouterr().out
+
+
+def test_planned_trajectory_is_feasible_and_lies_above_the_bound(starts):
+    """The plan is a real trajectory (tip held, every rate within its limit, tip in view) and never beats the bound."""
+    robot, lim, cone = MultiBackboneRobot(), OcclusionLimits(), LensCone()
+    rates = np.asarray(lim.rate_limit)[:7]
+    for q0 in starts[:2]:
+        plan, bound = hold_arc_plan(robot, q0), hold_rate_bound(robot, q0)
+        q = np.vstack([q0, plan["q_plan"]])
+        gamma = np.r_[0.0, plan["gamma_plan"]]
+        assert np.all(np.abs(np.diff(q, axis=0)) <= rates * 0.01 + 1e-12)
+        assert np.all(np.abs(np.diff(gamma)) <= lim.gamma_rate * 0.01 + 1e-12)
+        p0, R0 = robot.forward_kinematics(q0)
+        p, R = robot.forward_kinematics(plan["q_plan"])
+        assert np.abs(p - p0).max() < 1e-9 and np.abs(R - R0).max() < 1e-9
+        assert np.all(cone_coordinates(p0, plan["gamma_plan"], cone)["angle"] <= 0.7 * cone.beta + 1e-12)
+        direct = occlusion_details(robot, plan["q_plan"], plan["gamma_plan"], cone)["voi"]
+        np.testing.assert_allclose(plan["voi_plan"], direct, rtol=1e-12)
+        assert plan["mean_voi_plan"] == pytest.approx(direct.mean())
+        assert np.all(plan["voi_plan"] >= bound["voi_bound"] - 1e-12)
+        assert plan["target_voi"] >= bound["static_voi"] - 1e-12
+
+
+def test_plan_meets_the_bound_when_rates_are_unlimited(starts):
+    robot, q0 = MultiBackboneRobot(), starts[0]
+    fast = OcclusionLimits(bend_rate=100, plane_rate=100, insertion_rate=1.0, gamma_rate=100)
+    plan = hold_arc_plan(robot, q0, fast, dt=0.1, steps=4)
+    bound = hold_rate_bound(robot, q0, fast, dt=0.1, steps=4)
+    np.testing.assert_allclose(plan["voi_plan"], bound["static_voi"], rtol=1e-12)
+
+
+def test_gamma_grid_passes_through_the_start():
+    grid = gamma_grid(0.3, GAMMA_RESOLUTION)
+    assert 0.3 in grid and np.allclose(np.diff(grid), GAMMA_RESOLUTION)
+    assert grid[0] >= 0.3 - np.pi - 1e-12 and grid[-1] <= 0.3 + np.pi + 1e-12

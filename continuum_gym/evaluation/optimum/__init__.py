@@ -30,7 +30,9 @@ requirement (tip within ``visibility`` = 0.7 of the cone half-angle beta from th
   endoscope rotations gamma (the tip is fixed, so the feasible gamma set is the same for the whole arc).
 - :func:`hold_rate_bound` / :func:`env_hold_rate_bound` — what an *episode* can reach: a lower bound on the
   VOI after each control step of a hold task, for any controller that holds the tip within the rate limits
-  (its mean bounds the episode-mean VOI the evaluation scores; the hold optimum is its floor).
+  (its mean bounds the episode-mean VOI the evaluation scores; the hold optimum is its floor);
+  :func:`hold_arc_plan` — a feasible trajectory along the arc from the task's start, an episode-mean VOI that
+  is achievable. The best episode any controller can make lies between the two.
 - :func:`circle_optimum` — for task (b), a time-connected lower bound: at sampled times the arc is the
   connected component reached from the previous time's optimum, minimised over the arc and gamma.
 
@@ -51,7 +53,7 @@ _EXPORTS = {
     "feasible_gamma_intervals": "occlusion", "hold_optimum": "occlusion", "hold_study": "occlusion",
     "projected_gradient_hold": "occlusion",
     "GAMMA_RESOLUTION": "rate_bound", "arc_travel": "rate_bound", "env_hold_rate_bound": "rate_bound",
-    "hold_rate_bound": "rate_bound",
+    "gamma_grid": "rate_bound", "hold_arc_plan": "rate_bound", "hold_rate_bound": "rate_bound",
     "HOLD_N_STARTS": "protocol", "HOLD_STARTS_SEED": "protocol", "LSQ_ORIENTATION_WEIGHT": "protocol",
     "VISIBILITY": "protocol",
     "SelfMotion": "self_motion", "trace_self_motion": "self_motion", "INSERTION_SCALE": "self_motion",

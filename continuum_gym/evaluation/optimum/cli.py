@@ -210,6 +210,8 @@ def summary_table(results: dict) -> str:
         b = results["hold_test_rate_bound"]
         rows.append(f"| | rate-limited bound on the episode-mean VOI ({b['steps']} steps of {b['dt']:g} s) | "
                     f"{b['mean_of_mean_voi_bound']:.3f} |")
+        rows.append(f"| | planned trajectory along the self-motion arc (achievable episode-mean VOI) | "
+                    f"{b['mean_of_mean_voi_plan']:.3f} |")
     if "circle" in results:
         c = results["circle"]
         rows += [f"| circle | optimum mean VOI (gamma free) | {c['optimum_mean_voi']:.3f} |",

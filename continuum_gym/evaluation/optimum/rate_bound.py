@@ -56,6 +56,12 @@ def arc_travel(q: np.ndarray, start: int, closed: bool) -> np.ndarray:
     return travel
 
 
+def gamma_grid(gamma0: float, resolution: float) -> np.ndarray:
+    """Endoscope rotations sampled every ``resolution`` over one turn, through ``gamma0`` exactly."""
+    half = int(math.pi / resolution)
+    return gamma0 + resolution * np.arange(-half, half + 1)
+
+
 def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None = None, *,
                     dt: float = 0.01, steps: int = 150, gamma0: float = 0.0, visibility: float = VISIBILITY,
                     cone: LensCone | None = None, gamma_resolution: float = GAMMA_RESOLUTION) -> dict[str, Any]:
@@ -76,41 +82,21 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
         ``steps_to_static`` (first step at which the bound reaches it), ``start_voi`` (VOI at q0, gamma0).
         NaN everywhere if no gamma keeps the tip in view.
     """
-    robot = MultiBackboneRobot() if robot is None else robot
-    if robot.dof != 7:
-        raise ValueError(f"robot: hold_rate_bound needs a 7-DoF robot (a one-dimensional self-motion arc); "
-                         f"got dof={robot.dof}")
-    limits = OcclusionLimits() if limits is None else limits
-    cone = LensCone() if cone is None else cone
-    q0 = as_finite(q0, (7,), "q0")
-    dt = positive(dt, "dt")
-    if dt > 0.1:
-        raise ValueError(f"dt must be in (0, 0.1] s; got {dt!r}")
-    steps = positive_int(steps, "steps")
-    resolution = positive(gamma_resolution, "gamma_resolution")
-    if resolution > 0.1:
-        raise ValueError(f"gamma_resolution must be in (0, 0.1] rad; got {gamma_resolution!r}")
-    visibility = visibility_fraction(visibility)
-
-    arc = trace_self_motion(robot, q0, limits, step=TRACE_STEP)
-    rates = np.asarray(limits.rate_limit, dtype=float)[:7]
+    grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_rate_bound")
+    if grid is None:
+        return {"voi_bound": np.full(int(steps), math.nan), "mean_voi_bound": math.nan, "static_voi": math.nan,
+                "steps_to_static": -1, "start_voi": _start_voi(robot, q0, gamma0, cone)}
+    arc, rates, gamma, voi, limits = grid
+    dt, steps = float(dt), int(steps)
     # First step at which each sample can be reached (every joint within its rate budget). Both are optimistic
     # by one sample, so that the sampled sets cover the continuous reachable sets: an arc point counts as
     # reached when a neighbour is, a gamma sample when the gamma one sample nearer the start is.
     arc_step = np.ceil(np.max(arc_travel(arc.q, arc.start_index, arc.closed) / (rates * dt), axis=1) - 1e-9)
     padded = np.pad(arc_step, 1, mode="wrap" if arc.closed else "edge")
     arc_step = np.minimum(np.minimum(padded[:-2], padded[1:-1]), padded[2:])
-    gamma = float(gamma0) + np.arange(-math.pi, math.pi, resolution)
+    resolution = float(gamma_resolution)
     gamma_step = np.ceil(np.maximum(np.abs(gamma - gamma0) - resolution, 0.0) / (limits.gamma_rate * dt) - 1e-9)
-    tip, _ = robot.forward_kinematics(q0)
-    in_view = cone_coordinates(tip, gamma, cone)["angle"] <= visibility * cone.beta
-    start_voi = float(occlusion_details(robot, q0, float(gamma0), cone)["voi"])
-    if not in_view.any():
-        nan = np.full(steps, math.nan)
-        return {"voi_bound": nan, "mean_voi_bound": math.nan, "static_voi": math.nan, "steps_to_static": -1,
-                "start_voi": start_voi}
-    gamma, gamma_step = gamma[in_view], gamma_step[in_view]
-    voi = occlusion_details(robot, arc.q[:, None, :], gamma[None, :], cone)["voi"]
+    start_voi = _start_voi(robot, q0, gamma0, cone)
     # lowest VOI among cells reachable by step k: the cell (i, g) is reachable from max(arc_step_i, gamma_step_g)
     first = np.maximum(arc_step[:, None], gamma_step[None, :]).ravel()
     order = np.argsort(first, kind="stable")
@@ -124,21 +110,138 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
             "steps_to_static": int(reached[0] + 1) if len(reached) else -1, "start_voi": start_voi}
 
 
+def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None = None, *,
+                  dt: float = 0.01, steps: int = 150, gamma0: float = 0.0, visibility: float = VISIBILITY,
+                  cone: LensCone | None = None, gamma_resolution: float = GAMMA_RESOLUTION,
+                  targets: int = 64) -> dict[str, Any]:
+    """A feasible hold trajectory that travels along the self-motion arc: an *achievable* episode-mean VOI.
+
+    With :func:`hold_rate_bound` below it, it brackets the best episode any controller can make. For each of
+    about ``targets`` target points spread over the arc (and the arc's best point), the joints move each step as
+    far along the arc towards the target as every joint's rate limit allows (so the tip pose is held and no
+    joint rate is exceeded), while the endoscope turns by at most ``gamma_rate * dt`` per step, either greedily
+    (the lowest VOI within reach at the new arc point) or towards the target's best gamma; the best of these
+    trajectories by mean VOI is returned. The planner knows the whole arc in advance: it is an offline
+    reference, like the hold optimum, not a controller a policy could run.
+
+    Returns:
+        dict: ``voi_plan`` (steps,), ``mean_voi_plan``, ``q_plan`` (steps, 7), ``gamma_plan`` (steps,),
+        ``target_voi`` (static VOI at the chosen target). NaN if no gamma keeps the tip in view.
+    """
+    grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_arc_plan")
+    steps = int(steps)
+    if grid is None:
+        return {"voi_plan": np.full(steps, math.nan), "mean_voi_plan": math.nan,
+                "q_plan": np.full((steps, 7), math.nan), "gamma_plan": np.full(steps, math.nan),
+                "target_voi": math.nan}
+    arc, rates, gamma, voi, limits = grid
+    targets = positive_int(targets, "targets")
+    budget = rates * float(dt)
+    turn = limits.gamma_rate * float(dt) * (1 + 1e-12)
+    # cumulative per-joint travel from the arc's first point (the planner does not wrap round a closed arc)
+    along = np.vstack([np.zeros((1, 7)), np.cumsum(np.abs(np.diff(arc.q, axis=0)), axis=0)])
+    best_cell = np.unravel_index(int(np.argmin(voi)), voi.shape)
+    ends = np.unique(np.r_[np.linspace(0, len(arc.q) - 1, targets).round().astype(int), best_cell[0]])
+    g_start = int(np.argmin(np.abs(gamma - gamma0)))
+    best: tuple | None = None
+    for target in ends:
+        path = _arc_path(along, arc.start_index, int(target), budget, steps)
+        for mode in ("greedy", "target"):
+            g_path = _gamma_path(voi, gamma, path, g_start, turn, int(np.argmin(voi[target])), mode)
+            values = voi[path, g_path]
+            if best is None or values.mean() < best[0].mean():
+                best = (values, path, g_path, target)
+    assert best is not None
+    values, path, g_path, target = best
+    return {"voi_plan": values, "mean_voi_plan": float(values.mean()), "q_plan": arc.q[path],
+            "gamma_plan": gamma[g_path], "target_voi": float(voi[target].min())}
+
+
+def _arc_path(along: np.ndarray, start: int, target: int, budget: np.ndarray, steps: int) -> np.ndarray:
+    """Arc index after each step: as far towards ``target`` as every joint's budget per step allows."""
+    path = np.empty(steps, dtype=np.int64)
+    i = start
+    for k in range(steps):
+        if target > i:
+            reach = min(int(np.searchsorted(along[:, j], along[i, j] + budget[j], side="right")) - 1
+                        for j in range(along.shape[1]))
+            i = min(max(reach, i), target)
+        elif target < i:
+            reach = max(int(np.searchsorted(along[:, j], along[i, j] - budget[j], side="left"))
+                        for j in range(along.shape[1]))
+            i = max(min(reach, i), target)
+        path[k] = i
+    return path
+
+
+def _gamma_path(voi: np.ndarray, gamma: np.ndarray, path: np.ndarray, g: int, turn: float, g_target: int,
+                mode: str) -> np.ndarray:
+    """Gamma index after each step, turning at most ``turn`` per step (greedy, or towards ``g_target``)."""
+    out = np.empty(len(path), dtype=np.int64)
+    for k, i in enumerate(path):
+        lo = int(np.searchsorted(gamma, gamma[g] - turn, side="left"))
+        hi = int(np.searchsorted(gamma, gamma[g] + turn, side="right"))
+        if mode == "greedy":
+            g = lo + int(np.argmin(voi[i, lo:hi]))
+        else:
+            g = min(max(g_target, lo), hi - 1)
+        out[k] = g
+    return out
+
+
+def _start_voi(robot: MultiBackboneRobot | None, q0: ArrayLike, gamma0: float, cone: LensCone | None) -> float:
+    robot = MultiBackboneRobot() if robot is None else robot
+    return float(occlusion_details(robot, np.asarray(q0, dtype=float), float(gamma0), cone or LensCone())["voi"])
+
+
+def _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, caller):
+    """Checked inputs, the arc of q0 and VOI over (arc points x gammas that keep the tip in view); None if no
+    gamma sees the tip. Returns (arc, joint rate limits, feasible gammas, VOI (m, g), limits)."""
+    robot = MultiBackboneRobot() if robot is None else robot
+    if robot.dof != 7:
+        raise ValueError(f"robot: {caller} needs a 7-DoF robot (a one-dimensional self-motion arc); "
+                         f"got dof={robot.dof}")
+    limits = OcclusionLimits() if limits is None else limits
+    cone = LensCone() if cone is None else cone
+    q0 = as_finite(q0, (7,), "q0")
+    dt = positive(dt, "dt")
+    if dt > 0.1:
+        raise ValueError(f"dt must be in (0, 0.1] s; got {dt!r}")
+    positive_int(steps, "steps")
+    resolution = positive(gamma_resolution, "gamma_resolution")
+    if resolution > 0.1:
+        raise ValueError(f"gamma_resolution must be in (0, 0.1] rad; got {gamma_resolution!r}")
+    visibility = visibility_fraction(visibility)
+    tip, _ = robot.forward_kinematics(q0)
+    gamma = gamma_grid(float(gamma0), resolution)
+    gamma = gamma[cone_coordinates(tip, gamma, cone)["angle"] <= visibility * cone.beta]
+    if len(gamma) == 0:
+        return None
+    arc = trace_self_motion(robot, q0, limits, step=TRACE_STEP)
+    voi = occlusion_details(robot, arc.q[:, None, :], gamma[None, :], cone)["voi"]
+    return arc, np.asarray(limits.rate_limit, dtype=float)[:7], gamma, voi, limits
+
+
 def _bound_job(job: dict) -> dict:
-    result = hold_rate_bound(job["robot"], job["q0"], job["limits"], dt=job["dt"], steps=job["steps"],
-                             visibility=job["visibility"], cone=job["cone"])
+    keywords = {"dt": job["dt"], "steps": job["steps"], "visibility": job["visibility"], "cone": job["cone"]}
+    result = hold_rate_bound(job["robot"], job["q0"], job["limits"], **keywords)
+    plan = hold_arc_plan(job["robot"], job["q0"], job["limits"], **keywords)
     result["voi_bound"] = result["voi_bound"].tolist()
+    result["voi_plan"] = plan["voi_plan"].tolist()
+    result["mean_voi_plan"] = plan["mean_voi_plan"]
     return result
 
 
 def env_hold_rate_bound(n_tasks: int = 32, split: str = "test", config: Any = None, visibility: float = VISIBILITY,
                         workers: int = 2, progress: bool = True) -> dict[str, Any]:
-    """:func:`hold_rate_bound` on ids 0..n-1 of the OcclusionAvoidance env's hold tasks of ``split``.
+    """:func:`hold_rate_bound` and :func:`hold_arc_plan` on ids 0..n-1 of the OcclusionAvoidance env's hold tasks.
 
     ``config`` is an ``OcclusionConfig`` (None: the env's defaults); its limits, robot, cone, control step and
-    hold duration are used, with the env's hold starts (gamma 0). Returns per-task lists (``voi_bound`` (n, steps),
-    ``mean_voi_bound``, ``static_voi``, ``steps_to_static``, ``start_voi``) and the means over tasks
-    ``mean_of_mean_voi_bound`` (the bound on the task set's mean episode VOI) and ``mean_static_voi``.
+    hold duration are used, with the env's hold starts (gamma 0) of ``split``. Returns per-task lists
+    (``voi_bound`` and ``voi_plan`` (n, steps), ``mean_voi_bound``, ``mean_voi_plan``, ``static_voi``,
+    ``steps_to_static``, ``start_voi``) and the means over tasks ``mean_of_mean_voi_bound`` (below every
+    controller's mean episode VOI on the task set), ``mean_of_mean_voi_plan`` (achieved by the planned
+    trajectories) and ``mean_static_voi``.
     """
     from continuum_gym.envs.occlusion.config import OcclusionConfig
     from continuum_gym.envs.occlusion.tasks import OCCLUSION_DURATION_S, hold_start_pool
@@ -153,8 +256,10 @@ def env_hold_rate_bound(n_tasks: int = 32, split: str = "test", config: Any = No
     results = map_jobs(_bound_job, jobs, positive_int(workers, "workers"), progress, "hold rate bound")
     out: dict[str, Any] = {"task_ids": list(range(len(starts))), "split": split, "steps": steps,
                            "dt": config.control_dt, "visibility": visibility_fraction(visibility)}
-    for key in ("voi_bound", "mean_voi_bound", "static_voi", "steps_to_static", "start_voi"):
+    for key in ("voi_bound", "voi_plan", "mean_voi_bound", "mean_voi_plan", "static_voi", "steps_to_static",
+                "start_voi"):
         out[key] = [r[key] for r in results]
     out["mean_of_mean_voi_bound"] = float(np.mean(out["mean_voi_bound"]))
+    out["mean_of_mean_voi_plan"] = float(np.mean(out["mean_voi_plan"]))
     out["mean_static_voi"] = float(np.mean(out["static_voi"]))
     return out
