@@ -175,3 +175,38 @@ def test_gamma_grid_passes_through_the_start():
     grid = gamma_grid(0.3, GAMMA_RESOLUTION)
     assert 0.3 in grid and np.allclose(np.diff(grid), GAMMA_RESOLUTION)
     assert grid[0] >= 0.3 - np.pi - 1e-12 and grid[-1] <= 0.3 + np.pi + 1e-12
+
+
+def test_the_shipped_cache_holds_the_bound_and_plan_of_the_test_hold_tasks():
+    from continuum_gym.evaluation.optimum import load_optimum_cache
+
+    cache = load_optimum_cache()
+    entry, optimum = cache["hold_test_rate_bound"], np.asarray(cache["hold_test"]["optimum_voi"])
+    assert len(entry["mean_voi_bound"]) == len(optimum) == 32 and entry["split"] == "test"
+    bound, plan = np.asarray(entry["mean_voi_bound"]), np.asarray(entry["mean_voi_plan"])
+    assert np.all(optimum <= bound) and np.all(bound <= plan)
+    lim = OcclusionLimits()
+    first = np.asarray(hold_start_pool("test", float(lim.max_bend), tuple(lim.insertion)))[:2]
+    robot = MultiBackboneRobot()
+    np.testing.assert_allclose(bound[:2], [hold_rate_bound(robot, q0)["mean_voi_bound"] for q0 in first], rtol=1e-12)
+    np.testing.assert_allclose(plan[:2], [hold_arc_plan(robot, q0)["mean_voi_plan"] for q0 in first], rtol=1e-12)
+
+
+def test_evaluate_adds_the_bound_and_plan_rows_for_a_variant(tmp_path, monkeypatch):
+    """A 3-segment variant (its own arc): evaluate computes its bound and plan once, per validation hold task."""
+    from continuum_gym.envs.occlusion.config import OcclusionConfig
+    from continuum_gym.evaluation.evaluate import evaluate_policy
+
+    monkeypatch.setenv("CONTINUUM_GYM_CACHE", str(tmp_path))
+    robot = MultiBackboneRobot(lengths=(0.028, 0.020, 0.017))
+    table = evaluate_policy(lambda obs: np.zeros((obs.shape[0], 8)), OCC, env_kwargs={"robot": robot}, episodes=2,
+                            split="validation", progress=False)
+    optimum, bound, plan = (table[row]["mean_voi"] for row in ("offline_optimum", "rate_limited_bound",
+                                                               "planned_trajectory"))
+    assert bound["n_tasks"] == plan["n_tasks"] == 2
+    assert optimum["mean"] <= bound["mean"] <= plan["mean"]
+    config = OcclusionConfig(robot=robot)
+    lim = config.limits
+    starts = np.asarray(hold_start_pool("validation", float(lim.max_bend), tuple(lim.insertion), robot, config.cone))
+    direct = [hold_rate_bound(robot, q0, lim, cone=config.cone)["mean_voi_bound"] for q0 in starts[:2]]
+    assert bound["mean"] == pytest.approx(np.mean(direct), rel=1e-12)

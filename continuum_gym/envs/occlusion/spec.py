@@ -34,7 +34,14 @@ SPEC = register_env(EnvSpec(
     diagnostics=("visibility_guarded_fraction",),
     policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target"),
     references=(ReferenceRow("offline_optimum", "hold_test", "optimum_voi", "mean_voi", "per_task", "hold",
-                             "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"),),
+                             "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"),
+                # the optimum is a configuration; an episode starts elsewhere and travels at the rate limits
+                ReferenceRow("rate_limited_bound", "hold_test_rate_bound", "mean_voi_bound", "mean_voi", "per_task",
+                             "hold", "hold test tasks only: no controller that holds the tip at the rate limits "
+                             "scores an episode below it"),
+                ReferenceRow("planned_trajectory", "hold_test_rate_bound", "mean_voi_plan", "mean_voi", "per_task",
+                             "hold", "hold test tasks only: a feasible trajectory along the self-motion arc, "
+                             "planned offline")),
     optimum_tasks=("hold", "circle"),
     headroom=("hold", "mean_voi"),
     trace_task="circle",

@@ -414,8 +414,15 @@ def env_hold_test_optimum(n_tasks: int = ENV_HOLD_TASKS, limits: OcclusionLimits
             "optimum_mean_voi": float(np.nanmean(voi)), "visibility": visibility,
             "limits": {"max_bend": limits.max_bend, "insertion": list(limits.insertion)}}
 def env_optimum(config: Any, *, episodes: int, grid: int, split: str, progress: bool, workers: int) -> dict:
-    """The optimum cache of an OcclusionAvoidance variant (``EnvSpec.optimum``): its hold tasks' optimum."""
-    return {"hold_test": env_hold_test_optimum(episodes, limits=config.limits, workers=workers, progress=progress,
-                                               robot=config.robot, cone=config.cone, split=split)}
+    """The optimum cache of an OcclusionAvoidance variant (``EnvSpec.optimum``): its hold tasks' optimum, and
+    the rate-limited bound and planned trajectory of the same tasks' episodes."""
+    from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
+
+    out = {"hold_test": env_hold_test_optimum(episodes, limits=config.limits, workers=workers, progress=progress,
+                                              robot=config.robot, cone=config.cone, split=split)}
+    if config.robot.dof == 7:  # a one-dimensional self-motion arc (other robots: the optimum only)
+        out["hold_test_rate_bound"] = env_hold_rate_bound(episodes, split, config, workers=workers, progress=progress,
+                                                           traces=False)
+    return out
 
 

@@ -233,7 +233,7 @@ def _bound_job(job: dict) -> dict:
 
 
 def env_hold_rate_bound(n_tasks: int = 32, split: str = "test", config: Any = None, visibility: float = VISIBILITY,
-                        workers: int = 2, progress: bool = True) -> dict[str, Any]:
+                        workers: int = 2, progress: bool = True, traces: bool = True) -> dict[str, Any]:
     """:func:`hold_rate_bound` and :func:`hold_arc_plan` on ids 0..n-1 of the OcclusionAvoidance env's hold tasks.
 
     ``config`` is an ``OcclusionConfig`` (None: the env's defaults); its limits, robot, cone, control step and
@@ -241,7 +241,8 @@ def env_hold_rate_bound(n_tasks: int = 32, split: str = "test", config: Any = No
     (``voi_bound`` and ``voi_plan`` (n, steps), ``mean_voi_bound``, ``mean_voi_plan``, ``static_voi``,
     ``steps_to_static``, ``start_voi``) and the means over tasks ``mean_of_mean_voi_bound`` (below every
     controller's mean episode VOI on the task set), ``mean_of_mean_voi_plan`` (achieved by the planned
-    trajectories) and ``mean_static_voi``.
+    trajectories) and ``mean_static_voi``. ``traces=False`` leaves out the per-step lists (the caches keep the
+    per-task values only).
     """
     from continuum_gym.envs.occlusion.config import OcclusionConfig
     from continuum_gym.envs.occlusion.tasks import OCCLUSION_DURATION_S, hold_start_pool
@@ -256,8 +257,8 @@ def env_hold_rate_bound(n_tasks: int = 32, split: str = "test", config: Any = No
     results = map_jobs(_bound_job, jobs, positive_int(workers, "workers"), progress, "hold rate bound")
     out: dict[str, Any] = {"task_ids": list(range(len(starts))), "split": split, "steps": steps,
                            "dt": config.control_dt, "visibility": visibility_fraction(visibility)}
-    for key in ("voi_bound", "voi_plan", "mean_voi_bound", "mean_voi_plan", "static_voi", "steps_to_static",
-                "start_voi"):
+    keys = ("voi_bound", "voi_plan") if traces else ()
+    for key in (*keys, "mean_voi_bound", "mean_voi_plan", "static_voi", "steps_to_static", "start_voi"):
         out[key] = [r[key] for r in results]
     out["mean_of_mean_voi_bound"] = float(np.mean(out["mean_voi_bound"]))
     out["mean_of_mean_voi_plan"] = float(np.mean(out["mean_voi_plan"]))
