@@ -258,6 +258,27 @@ def test_pan_tilt_task_draws_the_coverage_distribution_off_its_grid():
     assert np.abs(centres["train"][:, None] - centres["test"][None]).max(axis=-1).min() > 1e-9
 
 
+def test_view_tracking_mixed_task_interleaves_pan_tilt_targets_and_random_motions():
+    """Even ids are pan_tilt instance id // 2, odd ids random instance id // 2: every field, the duration included."""
+    from dataclasses import fields
+
+    mixed = ViewTrackingEnv(task="mixed", task_split="validation")
+    singles = {name: ViewTrackingEnv(task=name, task_split="validation") for name in ("pan_tilt", "random")}
+    for task_id in range(6):
+        mixed.reset(options={"task_id": task_id})
+        single = singles["pan_tilt" if task_id % 2 == 0 else "random"]
+        single.reset(options={"task_id": task_id // 2})
+        assert int(mixed.core.tasks.task_id[0]) == task_id
+        for field in fields(mixed.core.tasks):
+            if field.name != "task_id":
+                np.testing.assert_array_equal(getattr(mixed.core.tasks, field.name)[0],
+                                              getattr(single.core.tasks, field.name)[0], err_msg=field.name)
+        obs_mixed = mixed.step(np.zeros(mixed.action_space.shape, dtype=np.float32))[0]
+        obs_single = single.step(np.zeros(single.action_space.shape, dtype=np.float32))[0]
+        np.testing.assert_array_equal(obs_mixed, obs_single)
+    assert mixed.core.tasks.duration[0] != singles["pan_tilt"].core.tasks.duration[0]  # id 5: a 6 s random motion
+
+
 def test_observe_target_appends_the_da_vinci_configuration_and_changes_nothing_else():
     plain = ViewTrackingEnv(task="random")
     extended = ViewTrackingEnv(task="random", observe_target=True)

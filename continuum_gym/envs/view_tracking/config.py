@@ -19,7 +19,7 @@ from continuum_gym.validation import boolean, choice, describe, integer, number
 
 #: The built-in task families' names (the paper's case studies and coverage grid exist only in the test split),
 #: here rather than in ``tasks.py`` so that the config (and ``continuum-gym --help``) does not import the generators.
-TASKS = ("random", "static", "pan_tilt", "case1", "case2", "coverage")
+TASKS = ("random", "static", "pan_tilt", "mixed", "case1", "case2", "coverage")
 TEST_ONLY = ("case1", "case2", "coverage")
 
 #: Largest coverage grid (points per axis).
@@ -44,7 +44,8 @@ class ViewTrackingConfig(EnvConfig):
 
     task: Any = field(default="random", metadata=spec(
         doc="`random` (smooth random da Vinci motions), `static` (random fixed views), `pan_tilt` (the coverage "
-            "map's distribution off its grid), the paper's `case1`, `case2`, `coverage` (test split only), a "
+            "map's distribution off its grid), `mixed` (even ids `pan_tilt`, odd ids `random`), the paper's `case1`, "
+            "`case2`, `coverage` (test split only), a "
             "registered family's name, or recorded data: a `DaVinciTrajectory` or a list of them",
         type_name="str or DaVinciTrajectory(s)"))
     task_split: str = field(default="train", metadata=spec(

@@ -204,7 +204,7 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
 
     ## Episode End
     ``truncated`` at the task's duration (random 6 s; static, pan_tilt, case studies and coverage 10 s, the
-    paper's T_max); ``terminated`` only if the state becomes non-finite.
+    paper's T_max; mixed: its instance's); ``terminated`` only if the state becomes non-finite.
 
     ## Info
     One layout for the single env, the native vector env and the SB3 adapter: numpy scalars

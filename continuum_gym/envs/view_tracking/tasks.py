@@ -1,5 +1,5 @@
-"""ViewTracking's built-in task families: ``random``, ``static``, ``pan_tilt`` and the paper's ``case1``,
-``case2`` and ``coverage`` grid.
+"""ViewTracking's built-in task families: ``random``, ``static``, ``pan_tilt``, ``mixed`` and the paper's
+``case1``, ``case2`` and ``coverage`` grid.
 
 See ``envs/tasks.py`` for what a task is and how instances are numbered per split.
 """
@@ -17,6 +17,7 @@ from continuum_gym.envs.tasks import (
     UNBOUNDED,
     TaskBatch,
     TaskContext,
+    copy_rows,
     empty_batch,
     sines_through,
     split_rng,
@@ -31,6 +32,13 @@ def view_tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskCont
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
     n = len(task_ids)
     batch = empty_batch(n, 6, 4)
+    if task == "mixed":  # even ids a pan_tilt target (the coverage map's), odd ids a random motion
+        for parity, name in ((0, "pan_tilt"), (1, "random")):
+            rows = np.flatnonzero(task_ids % 2 == parity)
+            if len(rows):
+                copy_rows(batch, rows, view_tasks(name, split, task_ids[rows] // 2, context))
+        batch.task_id = task_ids.copy()
+        return batch
     batch.task_id = task_ids.copy()
     batch.duration[:] = int(round(VIEW_DURATION_S[task] / context.control_dt))
     batch.start_q[:] = CASE_STUDY_START
