@@ -18,6 +18,7 @@ only in the test split.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -98,6 +99,19 @@ def copy_rows(target: TaskBatch, rows: np.ndarray | int | slice, source: TaskBat
             pad[1] = (0, capacity - values.shape[1])
             values = np.pad(values, pad)
         getattr(target, name)[rows] = values[source_rows]
+
+
+def interleaved(task_ids: np.ndarray, families: tuple[str, ...], draw: Callable[[str, np.ndarray], TaskBatch],
+                dof: int, dim: int) -> TaskBatch:
+    """A ``mixed`` family: task id k is instance ``k // len(families)`` of ``families[k % len(families)]``,
+    drawn by ``draw(family, instance_ids)``."""
+    batch = empty_batch(len(task_ids), dof, dim)
+    for parity, name in enumerate(families):
+        rows = np.flatnonzero(task_ids % len(families) == parity)
+        if len(rows):
+            copy_rows(batch, rows, draw(name, task_ids[rows] // len(families)))
+    batch.task_id = task_ids.copy()
+    return batch
 
 
 def grown(batch: TaskBatch, capacity: int) -> TaskBatch:

@@ -19,8 +19,8 @@ from continuum_gym.envs.tasks import (
     UNBOUNDED,
     TaskBatch,
     TaskContext,
-    copy_rows,
     empty_batch,
+    interleaved,
     reach_pose,
     sines_through,
     split_rng,
@@ -116,13 +116,8 @@ def occlusion_tasks(task: str, split: str, task_ids: npt.ArrayLike, context: Tas
     n = len(task_ids)
     dof = robot.dof
     if task == "mixed":  # even ids hold a pose, odd ids follow a random trajectory
-        batch = empty_batch(n, dof, 3)
-        for parity, name in ((0, "hold"), (1, "random")):
-            rows = np.flatnonzero(task_ids % 2 == parity)
-            if len(rows):
-                copy_rows(batch, rows, occlusion_tasks(name, split, task_ids[rows] // 2, context))
-        batch.task_id = task_ids.copy()
-        return batch
+        return interleaved(task_ids, ("hold", "random"),
+                           lambda name, ids: occlusion_tasks(name, split, ids, context), dof, 3)
     batch = empty_batch(n, dof, 3)
     batch.task_id = task_ids.copy()
     batch.duration[:] = int(round(OCCLUSION_DURATION_S[task] / context.control_dt))

@@ -17,8 +17,8 @@ from continuum_gym.envs.tasks import (
     UNBOUNDED,
     TaskBatch,
     TaskContext,
-    copy_rows,
     empty_batch,
+    interleaved,
     sines_through,
     split_rng,
 )
@@ -31,14 +31,10 @@ def view_tasks(task: str, split: str, task_ids: npt.ArrayLike, context: TaskCont
     """TaskBatch of a built-in view-tracking family (trajectories of q_davinci = [L_dV, yaw, pitch, roll])."""
     task_ids = np.asarray(task_ids, dtype=np.int64).reshape(-1)
     n = len(task_ids)
-    batch = empty_batch(n, 6, 4)
     if task == "mixed":  # even ids a pan_tilt target (the coverage map's), odd ids a random motion
-        for parity, name in ((0, "pan_tilt"), (1, "random")):
-            rows = np.flatnonzero(task_ids % 2 == parity)
-            if len(rows):
-                copy_rows(batch, rows, view_tasks(name, split, task_ids[rows] // 2, context))
-        batch.task_id = task_ids.copy()
-        return batch
+        return interleaved(task_ids, ("pan_tilt", "random"), lambda name, ids: view_tasks(name, split, ids, context),
+                           6, 4)
+    batch = empty_batch(n, 6, 4)
     batch.task_id = task_ids.copy()
     batch.duration[:] = int(round(VIEW_DURATION_S[task] / context.control_dt))
     batch.start_q[:] = CASE_STUDY_START

@@ -25,6 +25,7 @@ from continuum_gym.evaluation.optimum.protocol import (
     HOLD_STARTS_SEED,
     VISIBILITY,
 )
+from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
 from continuum_gym.evaluation.optimum.self_motion import (
     NEWTON_TOLERANCE,
     TRACE_STEP,
@@ -416,8 +417,6 @@ def env_hold_test_optimum(n_tasks: int = ENV_HOLD_TASKS, limits: OcclusionLimits
 def env_optimum(config: Any, *, episodes: int, grid: int, split: str, progress: bool, workers: int) -> dict:
     """The optimum cache of an OcclusionAvoidance variant (``EnvSpec.optimum``): its hold tasks' optimum, and
     the rate-limited bound and planned trajectory of the same tasks' episodes."""
-    from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
-
     out = {"hold_test": env_hold_test_optimum(episodes, limits=config.limits, workers=workers, progress=progress,
                                               robot=config.robot, cone=config.cone, split=split)}
     if config.robot.dof == 7:  # a one-dimensional self-motion arc (other robots: the optimum only)

@@ -39,6 +39,8 @@ from continuum_gym.validation import as_finite, positive
 
 #: Default gamma sampling of the bound (rad).
 GAMMA_RESOLUTION = math.radians(0.25)
+#: Default number of target points the planner tries along the arc.
+PLAN_TARGETS = 64
 
 
 def arc_travel(q: np.ndarray, start: int, closed: bool) -> np.ndarray:
@@ -83,20 +85,23 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
         NaN everywhere if no gamma keeps the tip in view.
     """
     grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_rate_bound")
+    return _bound(grid, robot, q0, float(dt), int(steps), float(gamma0), cone, float(gamma_resolution))
+
+
+def _bound(grid: tuple | None, robot, q0, dt: float, steps: int, gamma0: float, cone, resolution: float) -> dict:
+    """``hold_rate_bound`` on the checked inputs and ``_arc_grid``'s grid."""
+    start_voi = _start_voi(robot, q0, gamma0, cone)
     if grid is None:
-        return {"voi_bound": np.full(int(steps), math.nan), "mean_voi_bound": math.nan, "static_voi": math.nan,
-                "steps_to_static": -1, "start_voi": _start_voi(robot, q0, gamma0, cone)}
+        return {"voi_bound": np.full(steps, math.nan), "mean_voi_bound": math.nan, "static_voi": math.nan,
+                "steps_to_static": -1, "start_voi": start_voi}
     arc, rates, gamma, voi, limits = grid
-    dt, steps = float(dt), int(steps)
     # First step at which each sample can be reached (every joint within its rate budget). Both are optimistic
     # by one sample, so that the sampled sets cover the continuous reachable sets: an arc point counts as
     # reached when a neighbour is, a gamma sample when the gamma one sample nearer the start is.
     arc_step = np.ceil(np.max(arc_travel(arc.q, arc.start_index, arc.closed) / (rates * dt), axis=1) - 1e-9)
     padded = np.pad(arc_step, 1, mode="wrap" if arc.closed else "edge")
     arc_step = np.minimum(np.minimum(padded[:-2], padded[1:-1]), padded[2:])
-    resolution = float(gamma_resolution)
     gamma_step = np.ceil(np.maximum(np.abs(gamma - gamma0) - resolution, 0.0) / (limits.gamma_rate * dt) - 1e-9)
-    start_voi = _start_voi(robot, q0, gamma0, cone)
     # lowest VOI among cells reachable by step k: the cell (i, g) is reachable from max(arc_step_i, gamma_step_g)
     first = np.maximum(arc_step[:, None], gamma_step[None, :]).ravel()
     order = np.argsort(first, kind="stable")
@@ -109,11 +114,10 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
     return {"voi_bound": bound, "mean_voi_bound": float(bound.mean()), "static_voi": static,
             "steps_to_static": int(reached[0] + 1) if len(reached) else -1, "start_voi": start_voi}
 
-
 def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None = None, *,
                   dt: float = 0.01, steps: int = 150, gamma0: float = 0.0, visibility: float = VISIBILITY,
                   cone: LensCone | None = None, gamma_resolution: float = GAMMA_RESOLUTION,
-                  targets: int = 64) -> dict[str, Any]:
+                  targets: int = PLAN_TARGETS) -> dict[str, Any]:
     """A feasible hold trajectory that travels along the self-motion arc: an *achievable* episode-mean VOI.
 
     With :func:`hold_rate_bound` below it, it brackets the best episode any controller can make. For each of
@@ -129,15 +133,18 @@ def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLim
         ``target_voi`` (static VOI at the chosen target). NaN if no gamma keeps the tip in view.
     """
     grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_arc_plan")
-    steps = int(steps)
+    return _plan(grid, float(dt), int(steps), float(gamma0), positive_int(targets, "targets"))
+
+
+def _plan(grid: tuple | None, dt: float, steps: int, gamma0: float, targets: int) -> dict:
+    """``hold_arc_plan`` on the checked inputs and ``_arc_grid``'s grid."""
     if grid is None:
         return {"voi_plan": np.full(steps, math.nan), "mean_voi_plan": math.nan,
                 "q_plan": np.full((steps, 7), math.nan), "gamma_plan": np.full(steps, math.nan),
                 "target_voi": math.nan}
     arc, rates, gamma, voi, limits = grid
-    targets = positive_int(targets, "targets")
-    budget = rates * float(dt)
-    turn = limits.gamma_rate * float(dt) * (1 + 1e-12)
+    budget = rates * dt
+    turn = limits.gamma_rate * dt * (1 + 1e-12)
     # cumulative per-joint travel from the arc's first point (the planner does not wrap round a closed arc)
     along = np.vstack([np.zeros((1, 7)), np.cumsum(np.abs(np.diff(arc.q, axis=0)), axis=0)])
     best_cell = np.unravel_index(int(np.argmin(voi)), voi.shape)
@@ -155,7 +162,6 @@ def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLim
     values, path, g_path, target = best
     return {"voi_plan": values, "mean_voi_plan": float(values.mean()), "q_plan": arc.q[path],
             "gamma_plan": gamma[g_path], "target_voi": float(voi[target].min())}
-
 
 def _arc_path(along: np.ndarray, start: int, target: int, budget: np.ndarray, steps: int) -> np.ndarray:
     """Arc index after each step: as far towards ``target`` as every joint's budget per step allows."""
@@ -223,9 +229,12 @@ def _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_reso
 
 
 def _bound_job(job: dict) -> dict:
-    keywords = {"dt": job["dt"], "steps": job["steps"], "visibility": job["visibility"], "cone": job["cone"]}
-    result = hold_rate_bound(job["robot"], job["q0"], job["limits"], **keywords)
-    plan = hold_arc_plan(job["robot"], job["q0"], job["limits"], **keywords)
+    """Bound and plan of one start from one traced arc and VOI grid (the expensive part, done once)."""
+    robot, q0, dt, steps = job["robot"], job["q0"], float(job["dt"]), int(job["steps"])
+    grid = _arc_grid(robot, q0, job["limits"], dt, steps, 0.0, job["visibility"], job["cone"], GAMMA_RESOLUTION,
+                     "env_hold_rate_bound")
+    result = _bound(grid, robot, q0, dt, steps, 0.0, job["cone"], GAMMA_RESOLUTION)
+    plan = _plan(grid, dt, steps, 0.0, PLAN_TARGETS)
     result["voi_bound"] = result["voi_bound"].tolist()
     result["voi_plan"] = plan["voi_plan"].tolist()
     result["mean_voi_plan"] = plan["mean_voi_plan"]
