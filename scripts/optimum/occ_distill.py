@@ -21,11 +21,15 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from plan_in_env import plan_action  # noqa: E402  (the scripted residual that runs a plan in the env)
 
 HERE = Path(__file__).resolve().parent
 ROOT = Path.home() / "campaigns" / "optimum"
@@ -35,8 +39,6 @@ SCALE, GUARD = 2.0, 0.69
 
 def plan_labels(split: str, first: int, count: int) -> dict[str, np.ndarray]:
     """(obs, action) of every step of the plans of ``split`` hold ids first..first+count-1, run in the env."""
-    from continuum_gym.envs.columns import at
-    from continuum_gym.envs.occlusion.outputs import OBS
     from continuum_gym.envs.occlusion.tasks import hold_start_pool
     from continuum_gym.evaluation.optimum import hold_arc_plan
     from continuum_gym.evaluation.rollout import make_core, run_episodes
@@ -50,21 +52,11 @@ def plan_labels(split: str, first: int, count: int) -> dict[str, np.ndarray]:
     ok = np.array([math.isfinite(p["mean_voi_plan"]) for p in plans])
     q_plan = np.stack([p["q_plan"] for p in plans], axis=1)
     g_plan = np.stack([p["gamma_plan"] for p in plans], axis=1)
-    rates = np.asarray(core.rate_scale_vec, dtype=float)
-    base_at = at(OBS.base_command, robot.n_segments)
-    dt = core.config.control_dt
     seen: list[tuple[np.ndarray, np.ndarray]] = []
-
-    def wrap(x):
-        return (x + math.pi) % (2 * math.pi) - math.pi
 
     def scripted(obs: np.ndarray) -> np.ndarray:
         k = min(len(seen), len(q_plan) - 1)
-        dq = q_plan[k] - core.q
-        dq[:, 1:6:2] = wrap(dq[:, 1:6:2])
-        desired = np.concatenate([dq, wrap(g_plan[k] - core.gamma)[:, None]], axis=1) / dt
-        base = obs[:, base_at:base_at + rates.size] * rates
-        action = np.clip((desired - base) / (SCALE * rates), -1.0, 1.0)
+        action = plan_action(core, obs, q_plan[k], g_plan[k], SCALE)
         action[~ok] = 0.0  # no plan (no gamma keeps the tip in view): the base alone
         seen.append((obs.copy(), action.copy()))
         return action

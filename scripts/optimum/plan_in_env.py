@@ -18,13 +18,30 @@ import math
 import numpy as np
 
 
+def plan_action(core, obs: np.ndarray, q_next: np.ndarray, gamma_next: np.ndarray, scale: float) -> np.ndarray:
+    """The residual action (N, 8) that makes base + residual move ``core`` to the plan's next joints and gamma
+    in one control step: the base command is read from the observation (``OBS.base_command``)."""
+    from continuum_gym.envs.columns import at
+    from continuum_gym.envs.occlusion.outputs import OBS
+
+    rates = np.asarray(core.rate_scale_vec, dtype=float)
+    first = at(OBS.base_command, core.robot.n_segments)
+    dq = q_next - core.q
+    dq[:, 1:6:2] = _wrap(dq[:, 1:6:2])  # bending-plane angles are angles on the circle
+    desired = np.concatenate([dq, _wrap(gamma_next - core.gamma)[:, None]], axis=1) / core.config.control_dt
+    base = obs[:, first:first + rates.size] * rates
+    return np.clip((desired - base) / (scale * rates), -1.0, 1.0)
+
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    return (x + math.pi) % (2 * math.pi) - math.pi
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", default="validation", choices=("validation", "test", "train"))
     parser.add_argument("--tasks", type=int, default=32)
     args = parser.parse_args(argv)
-    from continuum_gym.envs.columns import at
-    from continuum_gym.envs.occlusion.outputs import OBS
     from continuum_gym.envs.occlusion.tasks import hold_start_pool
     from continuum_gym.evaluation.optimum import hold_arc_plan
     from continuum_gym.evaluation.rollout import make_core, run_episodes
@@ -38,22 +55,12 @@ def main(argv: list[str] | None = None) -> int:
     plans = [hold_arc_plan(robot, q0, lim, visibility=guard, cone=core.cone) for q0 in starts[:args.tasks]]
     q_plan = np.stack([p["q_plan"] for p in plans], axis=1)  # (steps, N, 7)
     g_plan = np.stack([p["gamma_plan"] for p in plans], axis=1)
-    rates = np.asarray(core.rate_scale_vec, dtype=float)
-    first = at(OBS.base_command, robot.n_segments)
-    dt = core.config.control_dt
     step = {"k": 0}
-
-    def wrap(x):
-        return (x + math.pi) % (2 * math.pi) - math.pi
 
     def scripted(obs: np.ndarray) -> np.ndarray:
         k = min(step["k"], len(q_plan) - 1)
         step["k"] += 1
-        dq = q_plan[k] - core.q
-        dq[:, 1:6:2] = wrap(dq[:, 1:6:2])  # bending-plane angles are angles on the circle
-        desired = np.concatenate([dq, wrap(g_plan[k] - core.gamma)[:, None]], axis=1) / dt
-        base = obs[:, first:first + rates.size] * rates
-        return np.clip((desired - base) / (scale * rates), -1.0, 1.0)
+        return plan_action(core, obs, q_plan[k], g_plan[k], scale)
 
     out = run_episodes(core, scripted, np.arange(args.tasks), record=True)
     planned = np.array([p["mean_voi_plan"] for p in plans])
