@@ -53,13 +53,15 @@ def finished(root: Path, tag: str, seed: int) -> bool:
     return any((root / "runs" / tag).glob(f"*_seed{seed}/model.zip"))
 
 
-def train_one(root: Path, src: Path, tag: str, seed: int) -> dict:
+def train_one(root: Path, src: Path, tag: str, seed: int, imports: tuple[str, ...] = ()) -> dict:
     out = root / "runs" / tag
     out.mkdir(parents=True, exist_ok=True)
-    cmd = ["nice", "-n", "15", sys.executable, "-m", "continuum_gym.cli", "train", "--env", env_of(tag),
+    plugins = [arg for module in imports for arg in ("--import", module)]
+    cmd = ["nice", "-n", "15", sys.executable, "-m", "continuum_gym.cli", *plugins, "train", "--env", env_of(tag),
            "--seed", str(seed), "--hyperparams", str(HERE / f"{tag}.yml"), "--out", str(out), "--resume",
            "--no-progress"]
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(src))
+    # the frozen copy's scripts/optimum holds the campaign's plug-ins (vt_weighted_mix.py)
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.pathsep.join([str(src), str(src / "scripts" / "optimum")]))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.time()
     with open(root / "logs" / f"{tag}_seed{seed}.log", "a") as log:
@@ -77,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("items", nargs="+", help="tag:seeds, e.g. occ_s2:0-4")
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
     parser.add_argument("--src", type=Path, default=None, help="frozen package copy (default <root>/src)")
+    parser.add_argument("--import", dest="imports", action="append", default=[], metavar="MODULE",
+                        help="plug-in module for `continuum-gym --import` (from <src>/scripts/optimum), repeatable")
     args = parser.parse_args(argv)
     root, src = args.root, args.src or args.root / "src"
     for sub in ("runs", "logs", "results"):
@@ -90,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"skip {tag} seed {seed}: model.zip exists", flush=True)
             continue
         print(f"{time.strftime('%H:%M:%S')} train {tag} seed {seed}", flush=True)
-        record = train_one(root, src, tag, seed)
+        record = train_one(root, src, tag, seed, tuple(args.imports))
         with open(root / "results" / "train_cpu.jsonl", "a") as f:
             f.write(json.dumps(record) + "\n")
         print(f"{time.strftime('%H:%M:%S')} done {json.dumps(record)}", flush=True)
