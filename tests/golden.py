@@ -50,12 +50,16 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 #: pseudo-inverse (LAPACK's SVD) near singular configurations turns last-bit differences into other
 #: trajectories (case 2 OR 0.6786 / 0.6764, coverage 26.77 / 26.89 %, single grid cells by 0.45); the
 #: evaluation through the policies' float32 matmuls and the closed loops by 1.3e-2 relative at most,
-#: coverage by 0.9 percentage points. The tolerances are about twice those.
+#: coverage by 0.9 percentage points. The tolerances are about twice those. The target-point error of the
+#: ViewTracking residual (scale 3, not in its reward) is the most sensitive value: on an Ice Lake server (AVX-512,
+#: OpenBLAS SkylakeX kernels) its mean moved by 8.4 % and a CI bound by 14 % (a few random-motion episodes end
+#: on other trajectories; mean OR by 0.6 %, coverage equal), so it gets a tolerance of its own.
 CROSS_PLATFORM_TOLERANCE = {
     "env_steps": (("", "any", (1e-9, 4e-13)),),
     "reproduce": (("resolved_rate", "list", None), ("resolved_rate", "any", (2e-2, 2e-3)),
                   ("", "any", (1e-9, 1e-12))),
-    "evaluate": (("coverage_percent", "any", (0.0, 2.0)), ("", "any", (3e-2, 1e-4))),
+    "evaluate": (("coverage_percent", "any", (0.0, 2.0)), ("mean_position_error_m", "any", (0.3, 1e-4)),
+                 ("", "any", (3e-2, 1e-4))),
 }
 
 #: (case name, env id, front end, number of rows, steps, env kwargs).

@@ -56,6 +56,12 @@ def test_the_cross_platform_comparison_still_catches_changed_results():
     changed = {"method": {"mean_or": [0.798 * (1 + 10 * rtol), 0.5], "episodes": 40, "ended": True}}
     assert record_problems("evaluate", expected, changed, own=False)[0] == [
         f"/method/mean_or[0]: 0.798 != {0.798 * (1 + 10 * rtol)!r}"]
+    # The target-point error has a wider tolerance of its own, which still catches a doubled error.
+    error_rtol, _ = tolerance_of(CROSS_PLATFORM_TOLERANCE["evaluate"], "/env/method/mean_position_error_m/mean", 0.01)
+    assert rtol < error_rtol < 0.5
+    error = {"method": {"mean_position_error_m": [0.014]}}
+    assert record_problems("evaluate", error, {"method": {"mean_position_error_m": [0.0128]}}, own=False)[0] == []
+    assert record_problems("evaluate", error, {"method": {"mean_position_error_m": [0.028]}}, own=False)[0]
     one_more_episode = {"method": {"mean_or": [0.798, 0.5], "episodes": 41, "ended": True}}
     assert record_problems("evaluate", expected, one_more_episode, own=False)[0]
     # The resolved-rate trajectories of the reproduction are not compared across platforms; its scalars are.
