@@ -36,6 +36,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("run", type=Path, help="run directory (model.zip + config.yml)")
     parser.add_argument("--count", type=int, default=512, help="validation pan_tilt ids 0..count-1")
     parser.add_argument("--effort", default="standard", help="view_tracking_optimum effort (quick/standard/heavy)")
+    parser.add_argument("--reference", type=Path, default=None,
+                        help="an earlier output for the same targets and residual scale: reuse its optimum and holdable OR")
     parser.add_argument("--out", type=Path, default=Path.home() / "campaigns/optimum/analysis/vt_failures.npz")
     args = parser.parse_args(argv)
 
@@ -47,8 +49,14 @@ def main(argv: list[str] | None = None) -> int:
     final = result["final_or"]
     trace = result["trace_or"]
     targets = view_tasks("pan_tilt", "validation", ids, core.task_context).centre
-    opt = view_tracking_optimum(targets, effort=args.effort, workers=1, progress=True, baselines=False)
-    _, held, effort = holdable_optimum(opt["q"], targets, float(kwargs["residual_scale"]))
+    if args.reference is not None:
+        ref = np.load(args.reference)
+        if not np.array_equal(ref["targets"], targets):
+            raise SystemExit(f"--reference {args.reference} holds other targets")
+        opt, held, effort = {"overlap": ref["optimum"], "q": ref["q_opt"]}, ref["held"], ref["effort"]
+    else:
+        opt = view_tracking_optimum(targets, effort=args.effort, workers=1, progress=True, baselines=False)
+        _, held, effort = holdable_optimum(opt["q"], targets, float(kwargs["residual_scale"]))
     miss = final <= 0.8
     classes = {"unreachable": miss & (opt["overlap"] <= 0.8),
                "not holdable": miss & (opt["overlap"] > 0.8) & ((held <= 0.8) | (effort > 1.0))}

@@ -34,7 +34,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--import", dest="imports", action="append", default=[])
     parser.add_argument("--critic-steps", type=float, default=2e5, help="steps with the actor frozen first")
     parser.add_argument("--seed", type=int, default=100)
+    parser.add_argument("--log-std-shift", type=float, default=0.0,
+                        help="added to the policy's log std (gSDE) before fine-tuning: < 0 explores less")
+    parser.add_argument("--package-only", action="store_true",
+                        help="only (re)write the run files around an existing <out>/model.zip (see package())")
     args = parser.parse_args(argv)
+    if args.package_only:
+        package(args)
+        return 0
     for module in args.imports:
         importlib.import_module(module)
 
@@ -56,15 +63,39 @@ def main(argv: list[str] | None = None) -> int:
     model = PPO.load(args.run / "model.zip", env=venv, device="cpu",
                      custom_objects={"learning_rate": lambda p: lr * p, "lr_schedule": lambda p: lr * p})
     model.set_random_seed(args.seed)
+    with torch.no_grad():
+        model.policy.log_std.add_(args.log_std_shift)
     callbacks = [ActorBurnIn(int(args.critic_steps))] if args.critic_steps > 0 else []
     model.learn(int(args.steps), callback=callbacks, reset_num_timesteps=True, progress_bar=False)
     args.out.mkdir(parents=True, exist_ok=True)
     model.save(args.out / "model.zip")
-    shutil.copy(args.run / "config.yml", args.out / "config.yml")
-    (args.out / "finetune.yml").write_text(yaml.safe_dump({"from": str(args.run), **{
-        k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}}, sort_keys=False))
+    package(args)
     print(f"wrote {args.out}")
     return 0
+
+
+def package(args: argparse.Namespace) -> None:
+    """The fine-tuned run as a run directory ``scripts/ship_policies.py`` can ship: the source run's files,
+    ``config.yml`` with the total steps and a ``finetune`` block, ``command.txt`` with both commands. The source's
+    learning curve (``evaluations.npz``) does not cover the fine-tuning: it is kept as ``evaluations_source.npz``."""
+    config = yaml.safe_load((args.run / "config.yml").read_text())
+    settings = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "package_only"}
+    config["finetune"] = {**settings, "learning_rate": f"lin_{args.lr:g}", "source_total_timesteps":
+                          config["total_timesteps"]}
+    config["total_timesteps"] = int(config["total_timesteps"]) + int(args.steps)
+    (args.out / "config.yml").write_text(yaml.safe_dump(config, sort_keys=False))
+    for name in ("args.yml",):
+        if (args.run / name).exists():
+            shutil.copy(args.run / name, args.out / name)
+    if (args.run / "evaluations.npz").exists():
+        shutil.copy(args.run / "evaluations.npz", args.out / "evaluations_source.npz")
+    command = (args.run / "command.txt").read_text().rstrip("\n") if (args.run / "command.txt").exists() else ""
+    imports = " ".join(f"--import {m}" for m in args.imports)
+    (args.out / "command.txt").write_text(
+        f"{command}\n# then, from that run's model.zip (PYTHONPATH=.:scripts/optimum):\n"
+        f"python scripts/optimum/vt_finetune.py <run> --out <out> --steps {args.steps:g} --lr {args.lr:g} "
+        f"--task {args.task} {imports} --critic-steps {args.critic_steps:g} --seed {args.seed} "
+        f"--log-std-shift {args.log_std_shift:g}\n")
 
 
 if __name__ == "__main__":
