@@ -15,7 +15,6 @@ frozen first (``agents.residual.ActorBurnIn``), so that it fits the new return s
 from __future__ import annotations
 
 import argparse
-import importlib
 import shutil
 from pathlib import Path
 
@@ -42,20 +41,22 @@ def main(argv: list[str] | None = None) -> int:
     if args.package_only:
         package(args)
         return 0
-    for module in args.imports:
-        importlib.import_module(module)
-
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from continuum_gym.agents.residual import ActorBurnIn
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
+    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.evaluation.evaluate import policy_env_kwargs
+    from continuum_gym.plugins import import_modules
+
+    import_modules(args.imports, "--import module")
 
     torch.set_num_threads(1)
     config = yaml.safe_load((args.run / "config.yml").read_text())
-    env_config = dict(config["env_config"])
-    kwargs = {k: env_config[k] for k in ("base_controller", "residual_scale", "residual_space", "reward_weights")}
+    # the run's policy keywords (as evaluation takes them) and its reward, which fine-tuning keeps
+    kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), reward_weights=config["env_config"]["reward_weights"])
     hp = config["hyperparams"]
     venv = ContinuumSB3VecEnv(VIEW, int(hp["n_envs"]), seed=args.seed, task=args.task, task_split="train", **kwargs)
     venv = VecNormalize(VecMonitor(venv), norm_obs=False, norm_reward=True, gamma=float(hp["gamma"]))
