@@ -209,17 +209,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lookahead", type=float, nargs="*", default=None,
                         help="OverlapLookahead with these step sizes (action units); --gain is then ignored")
     parser.add_argument("--selection", action="store_true", help="pan_tilt ids 4096-5119 only")
+    parser.add_argument("--model-error", default="none", help="the env's model_error (none, mild, severe): the "
+                        "robot differs from the nominal model the base controller and the lookahead use")
     parser.add_argument("--out", type=Path, default=val_eval.ROOT / "results" / "val_view_ascent.jsonl")
     args = parser.parse_args(argv)
     model, config = load_policy(args.run)
-    kwargs = policy_env_kwargs(get_spec(VIEW), config)
+    kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), model_error=args.model_error)
     for gain in args.gain:
         if args.lookahead:
             policy = OverlapLookahead(model, config, args.lookahead, min_ratio=args.min_ratio)
         else:
             policy = OverlapAscent(model, config, gain, min_ratio=args.min_ratio) if gain else model
         summary, _ = val_eval.measure(VIEW, policy, kwargs, selection=args.selection)
-        row = dict(run=str(args.run), gain=gain, lookahead=args.lookahead, min_ratio=args.min_ratio, selection=args.selection, **summary)
+        row = dict(run=str(args.run), gain=gain, lookahead=args.lookahead, model_error=args.model_error,
+                   min_ratio=args.min_ratio, selection=args.selection, **summary)
         print(json.dumps(row), flush=True)
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")
