@@ -10,6 +10,8 @@ action units through the joint-space residual's map (``residual_scale * ACTION_S
     a = clip(policy(obs) + gain * dOR/da, -1, 1)
 
 It needs the same information as the base controller (robot model, target pose), nothing the env hides.
+The lookahead that Campaign 7 kept is now the env option ``overlap_polish`` (``envs/view_tracking/polish.py``);
+this script keeps the wrappers its screen measured.
 
     PYTHONPATH=.:scripts/optimum python scripts/optimum/or_ascent.py RUN --gain 30 --selection
 """
@@ -24,33 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from continuum_gym.envs.view_tracking.core import ACTION_SCALE
-from continuum_gym.envs.view_tracking.outputs import OBS, POSITION_ERROR_SCALE
+from continuum_gym.envs.view_tracking.outputs import OBS
+from continuum_gym.envs.view_tracking.polish import observed_camera
 from continuum_gym.geometry.overlap_clipping import make_overlap_work, overlap_ratio_in
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope import endoscope_kinematics, make_endoscope_workspace
-from continuum_gym.robots.rotations import rotation_exp
 
 VIEW = "ContinuumGym/ViewTracking-v0"
-
-
-@kernel(inline="always")
-def observed_camera(o, lower, upper, robot, le_dv, ws, q, p_cam, R, p_ct, J, w, turn, R_dv, p_dv):
-    """From one observation row o: its configuration q (and the camera there) and the da Vinci camera (p_dv, R_dv)."""
-    q[0] = lower[0] + (o[OBS.l0] + 1.0) * 0.5 * (upper[0] - lower[0])
-    q[1] = o[OBS.phi] * math.pi
-    q[2] = lower[2] + (o[OBS.theta1] + 1.0) * 0.5 * (upper[2] - lower[2])
-    q[3] = math.atan2(o[OBS.delta1], o[OBS.delta1 + 1])
-    q[4] = lower[4] + (o[OBS.theta2] + 1.0) * 0.5 * (upper[4] - lower[4])
-    q[5] = math.atan2(o[OBS.delta2], o[OBS.delta2 + 1])
-    endoscope_kinematics(q, robot, ws, p_cam, R, p_ct, J, False)
-    for a in range(3):
-        w[a] = o[OBS.orientation_error + a]
-    rotation_exp(w, turn)
-    for a in range(3):
-        for b in range(3):
-            R_dv[a, b] = turn[a, 0] * R[0, b] + turn[a, 1] * R[1, b] + turn[a, 2] * R[2, b]
-    for a in range(3):
-        p_dv[a] = p_ct[a] + o[OBS.target_error + a] * POSITION_ERROR_SCALE - le_dv * R_dv[a, 2]
 
 
 @kernel

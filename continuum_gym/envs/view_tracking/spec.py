@@ -33,7 +33,8 @@ SPEC = register_env(EnvSpec(
     task_sets=(TaskSet("static"), TaskSet("random"), TaskSet("case1", episodes=1), TaskSet("case2", episodes=1),
                TaskSet("coverage", grid=True)),
     diagnostics=(),
-    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target"),
+    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target",
+                 "overlap_polish"),
     references=(
         ReferenceRow("offline_optimum", "coverage", "optimum_or", "coverage_percent", "coverage", "coverage"),
         ReferenceRow("bounded_least_squares", "coverage", "bounded_least_squares_or", "coverage_percent", "coverage",
