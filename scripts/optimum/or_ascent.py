@@ -36,19 +36,16 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 
 
 @kernel
+def make_scratch():
+    """Work arrays of one observed camera and one OR (see ``observed_camera``)."""
+    return (np.empty(3), np.empty((3, 3)), np.empty(3), np.empty((6, 6)), make_endoscope_workspace(),
+            make_overlap_work(), np.empty(6), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(3))
+
+
+@kernel
 def overlap_gradient(obs, lower, upper, robot, le_dv, tan_half, near, far, h, grad, ratio):
     """Per row of obs (n, 22+): the OR at the observed configuration (ratio) and dOR/dq (grad, central)."""
-    p_cam = np.empty(3)
-    R = np.empty((3, 3))
-    p_ct = np.empty(3)
-    J = np.empty((6, 6))
-    ws = make_endoscope_workspace()
-    work = make_overlap_work()
-    q = np.empty(6)
-    w = np.empty(3)
-    turn = np.empty((3, 3))
-    R_dv = np.empty((3, 3))
-    p_dv = np.empty(3)
+    p_cam, R, p_ct, J, ws, work, q, w, turn, R_dv, p_dv = make_scratch()
     for i in range(obs.shape[0]):
         observed_camera(obs[i], lower, upper, robot, le_dv, ws, q, p_cam, R, p_ct, J, w, turn, R_dv, p_dv)
         ratio[i] = overlap_ratio_in(p_dv, R_dv, p_cam, R, tan_half, near, far, work)
@@ -67,17 +64,7 @@ def overlap_gradient(obs, lower, upper, robot, le_dv, tan_half, near, far, h, gr
 @kernel
 def overlap_at(obs, Q, lower, upper, robot, le_dv, tan_half, near, far, out):
     """OR of configuration Q[i] (n, 6) against row i's observed target (the da Vinci camera of obs[i])."""
-    p_cam = np.empty(3)
-    R = np.empty((3, 3))
-    p_ct = np.empty(3)
-    J = np.empty((6, 6))
-    ws = make_endoscope_workspace()
-    work = make_overlap_work()
-    q = np.empty(6)
-    w = np.empty(3)
-    turn = np.empty((3, 3))
-    R_dv = np.empty((3, 3))
-    p_dv = np.empty(3)
+    p_cam, R, p_ct, J, ws, work, q, w, turn, R_dv, p_dv = make_scratch()
     for i in range(obs.shape[0]):
         observed_camera(obs[i], lower, upper, robot, le_dv, ws, q, p_cam, R, p_ct, J, w, turn, R_dv, p_dv)
         endoscope_kinematics(Q[i], robot, ws, p_cam, R, p_ct, J, False)

@@ -116,9 +116,6 @@ class ViewTrackingConfig(EnvConfig):
         set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
         if self.overlap_polish is not None:
-            if isinstance(self.overlap_polish, (str, bool)):
-                raise ValueError(f"overlap_polish must be a number in (0, 1] (action units) or None; got "
-                                 f"{self.overlap_polish!r}")
             set_(self, "overlap_polish", number(self.overlap_polish, "overlap_polish", low=0.0, low_open=True,
                                                 high=1.0, unit="action units"))
             if self.residual_space != "joint":

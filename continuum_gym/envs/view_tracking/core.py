@@ -131,18 +131,20 @@ class ViewTrackingCore(BatchedCore):
         self._out = ViewOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
         self._model = self.kernel_model()
         self.overlap_polish = config.overlap_polish
+        lower, upper = self.robot.joint_limits
+        # what the lookahead reads besides the observation and the actions, and its output (``polish``)
+        self._polish_model = (self.control_dt, self._env.residual_scale * ACTION_SCALE, ACTION_SCALE, lower, upper,
+                              self.robot.kernel_args(), self.davinci.Le,
+                              np.array([self.frustum.tan_half, self.frustum.near, self.frustum.far]))
+        self._polished = np.empty((n, ACTION_DIM))
 
     def step(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.overlap_polish is not None:  # the lookahead on the OR (``polish``) before the compiled step
             from continuum_gym.envs.view_tracking.polish import polish_actions
 
-            lower, upper = self.robot.joint_limits
-            polished = np.empty((self.num_envs, ACTION_DIM))
             polish_actions(self.obs, np.asarray(actions, dtype=np.float64), np.asarray(active), self.overlap_polish,
-                           self.control_dt, self._env.residual_scale * ACTION_SCALE, ACTION_SCALE, lower, upper,
-                           self.robot.kernel_args(), self.davinci.Le, np.array([self.frustum.tan_half,
-                           self.frustum.near, self.frustum.far]), polished)
-            actions = polished.astype(np.asarray(actions).dtype)
+                           *self._polish_model, self._polished)
+            actions = self._polished.astype(np.asarray(actions).dtype)
         return super().step(actions, active)
 
     def kernel_model(self) -> tuple:
