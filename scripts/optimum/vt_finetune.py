@@ -35,6 +35,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=100)
     parser.add_argument("--log-std-shift", type=float, default=0.0,
                         help="added to the policy's log std (gSDE) before fine-tuning: < 0 explores less")
+    parser.add_argument("--overlap-polish", type=float, default=None,
+                        help="fine-tune (and write the run's config) with the env's overlap_polish option (Campaign 8)")
     parser.add_argument("--package-only", action="store_true",
                         help="only (re)write the run files around an existing <out>/model.zip (see package())")
     args = parser.parse_args(argv)
@@ -57,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     config = yaml.safe_load((args.run / "config.yml").read_text())
     # the run's policy keywords (as evaluation takes them) and its reward, which fine-tuning keeps
     kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), reward_weights=config["env_config"]["reward_weights"])
+    if args.overlap_polish is not None:
+        kwargs["overlap_polish"] = args.overlap_polish
     hp = config["hyperparams"]
     venv = ContinuumSB3VecEnv(VIEW, int(hp["n_envs"]), seed=args.seed, task=args.task, task_split="train", **kwargs)
     venv = VecNormalize(VecMonitor(venv), norm_obs=False, norm_reward=True, gamma=float(hp["gamma"]))
@@ -84,6 +88,8 @@ def package(args: argparse.Namespace) -> None:
     config["finetune"] = {**settings, "learning_rate": f"lin_{args.lr:g}", "source_total_timesteps":
                           config["total_timesteps"]}
     config["total_timesteps"] = int(config["total_timesteps"]) + int(args.steps)
+    if args.overlap_polish is not None:  # the policy acts with the polish: every tool evaluates it so
+        config["env_config"]["overlap_polish"] = args.overlap_polish
     (args.out / "config.yml").write_text(yaml.safe_dump(config, sort_keys=False))
     for name in ("args.yml",):
         if (args.run / name).exists():
@@ -96,7 +102,8 @@ def package(args: argparse.Namespace) -> None:
         f"{command}\n# then, from that run's model.zip (PYTHONPATH=.:scripts/optimum):\n"
         f"python scripts/optimum/vt_finetune.py <run> --out <out> --steps {args.steps:g} --lr {args.lr:g} "
         f"--task {args.task} {imports} --critic-steps {args.critic_steps:g} --seed {args.seed} "
-        f"--log-std-shift {args.log_std_shift:g}\n")
+        f"--log-std-shift {args.log_std_shift:g}"
+        + (f" --overlap-polish {args.overlap_polish:g}" if args.overlap_polish is not None else "") + "\n")
 
 
 if __name__ == "__main__":
