@@ -52,12 +52,14 @@ _EXPORTS = {
     "centring_gamma": "occlusion", "circle_optimum": "occlusion", "env_hold_test_optimum": "occlusion",
     "feasible_gamma_intervals": "occlusion", "hold_optimum": "occlusion", "hold_study": "occlusion",
     "projected_gradient_hold": "occlusion",
-    "GAMMA_RESOLUTION": "rate_bound", "arc_travel": "rate_bound", "env_hold_rate_bound": "rate_bound",
-    "gamma_grid": "rate_bound", "hold_arc_plan": "rate_bound", "hold_rate_bound": "rate_bound",
+    "arc_travel": "rate_bound", "env_hold_rate_bound": "rate_bound", "hold_rate_bound": "rate_bound",
+    # the planner and the self-motion tracer live with the controllers (the env's arc_plan base runs them)
+    "GAMMA_RESOLUTION": "continuum_gym.baselines.arc_plan", "gamma_grid": "continuum_gym.baselines.arc_plan",
+    "hold_arc_plan": "continuum_gym.baselines.arc_plan",
     "HOLD_N_STARTS": "protocol", "HOLD_STARTS_SEED": "protocol", "LSQ_ORIENTATION_WEIGHT": "protocol",
     "VISIBILITY": "protocol",
-    "SelfMotion": "self_motion", "trace_self_motion": "self_motion", "INSERTION_SCALE": "self_motion",
-    "TRACE_STEP": "self_motion",
+    "SelfMotion": "continuum_gym.baselines.self_motion", "trace_self_motion": "continuum_gym.baselines.self_motion",
+    "INSERTION_SCALE": "continuum_gym.baselines.self_motion", "TRACE_STEP": "continuum_gym.baselines.self_motion",
     "bounded_least_squares": "view", "coverage_optimum": "view", "overlap_of_configuration": "view",
     "view_tracking_optimum": "view",
 }
@@ -66,5 +68,6 @@ __all__ = sorted(_EXPORTS)
 
 def __getattr__(name: str):
     if name in _EXPORTS:
-        return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+        module = _EXPORTS[name]
+        return getattr(importlib.import_module(module if "." in module else f"{__name__}.{module}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -18,15 +18,7 @@ from continuum_gym.baselines.scenarios import (
     CircleTask,
     sample_hold_starts,
 )
-from continuum_gym.evaluation.optimum.protocol import (
-    CIRCLE_SAMPLE_DT,
-    ENV_HOLD_TASKS,
-    HOLD_N_STARTS,
-    HOLD_STARTS_SEED,
-    VISIBILITY,
-)
-from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
-from continuum_gym.evaluation.optimum.self_motion import (
+from continuum_gym.baselines.self_motion import (
     NEWTON_TOLERANCE,
     TRACE_STEP,
     SelfMotionTracer,
@@ -35,6 +27,14 @@ from continuum_gym.evaluation.optimum.self_motion import (
     trace_self_motion,
     trace_self_motion_from,
 )
+from continuum_gym.evaluation.optimum.protocol import (
+    CIRCLE_SAMPLE_DT,
+    ENV_HOLD_TASKS,
+    HOLD_N_STARTS,
+    HOLD_STARTS_SEED,
+    VISIBILITY,
+)
+from continuum_gym.evaluation.optimum.rate_bound import env_hold_rate_bound
 from continuum_gym.evaluation.optimum.workers import (
     map_jobs,
     positive_int,

@@ -30,17 +30,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from continuum_gym.baselines import OcclusionLimits
+from continuum_gym.baselines.arc_plan import (
+    GAMMA_RESOLUTION,
+    PLAN_TARGETS,
+    arc_grid,
+    plan_on_grid,
+)
 from continuum_gym.evaluation.optimum.protocol import VISIBILITY
-from continuum_gym.evaluation.optimum.self_motion import TRACE_STEP, trace_self_motion
 from continuum_gym.evaluation.optimum.workers import map_jobs, positive_int, visibility_fraction
-from continuum_gym.geometry import LensCone, cone_coordinates, occlusion_details
+from continuum_gym.geometry import LensCone, occlusion_details
 from continuum_gym.robots import MultiBackboneRobot
-from continuum_gym.validation import as_finite, positive
-
-#: Default gamma sampling of the bound (rad).
-GAMMA_RESOLUTION = math.radians(0.25)
-#: Default number of target points the planner tries along the arc.
-PLAN_TARGETS = 64
 
 
 def arc_travel(q: np.ndarray, start: int, closed: bool) -> np.ndarray:
@@ -56,12 +55,6 @@ def arc_travel(q: np.ndarray, start: int, closed: bool) -> np.ndarray:
         loop = steps.sum(axis=0) + np.abs(q[-1] - q[0])
         travel = np.minimum(travel, loop - travel)
     return travel
-
-
-def gamma_grid(gamma0: float, resolution: float) -> np.ndarray:
-    """Endoscope rotations sampled every ``resolution`` over one turn, through ``gamma0`` exactly."""
-    half = int(math.pi / resolution)
-    return gamma0 + resolution * np.arange(-half, half + 1)
 
 
 def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None = None, *,
@@ -84,7 +77,7 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
         ``steps_to_static`` (first step at which the bound reaches it), ``start_voi`` (VOI at q0, gamma0).
         NaN everywhere if no gamma keeps the tip in view.
     """
-    grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_rate_bound")
+    grid = arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_rate_bound")
     return _bound(grid, robot, q0, float(dt), int(steps), float(gamma0), cone, float(gamma_resolution))
 
 
@@ -114,127 +107,18 @@ def _bound(grid: tuple | None, robot, q0, dt: float, steps: int, gamma0: float, 
     return {"voi_bound": bound, "mean_voi_bound": float(bound.mean()), "static_voi": static,
             "steps_to_static": int(reached[0] + 1) if len(reached) else -1, "start_voi": start_voi}
 
-def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLimits | None = None, *,
-                  dt: float = 0.01, steps: int = 150, gamma0: float = 0.0, visibility: float = VISIBILITY,
-                  cone: LensCone | None = None, gamma_resolution: float = GAMMA_RESOLUTION,
-                  targets: int = PLAN_TARGETS) -> dict[str, Any]:
-    """A feasible hold trajectory that travels along the self-motion arc: an *achievable* episode-mean VOI.
-
-    With :func:`hold_rate_bound` below it, it brackets the best episode any controller can make. For each of
-    about ``targets`` target points spread over the arc (and the arc's best point), the joints move each step as
-    far along the arc towards the target as every joint's rate limit allows (so the tip pose is held and no
-    joint rate is exceeded), while the endoscope turns by at most ``gamma_rate * dt`` per step, either greedily
-    (the lowest VOI within reach at the new arc point) or towards the target's best gamma; the best of these
-    trajectories by mean VOI is returned. The planner knows the whole arc in advance: it is an offline
-    reference, like the hold optimum, not a controller a policy could run.
-
-    Returns:
-        dict: ``voi_plan`` (steps,), ``mean_voi_plan``, ``q_plan`` (steps, 7), ``gamma_plan`` (steps,),
-        ``target_voi`` (static VOI at the chosen target). NaN if no gamma keeps the tip in view.
-    """
-    grid = _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, "hold_arc_plan")
-    return _plan(grid, float(dt), int(steps), float(gamma0), positive_int(targets, "targets"))
-
-
-def _plan(grid: tuple | None, dt: float, steps: int, gamma0: float, targets: int) -> dict:
-    """``hold_arc_plan`` on the checked inputs and ``_arc_grid``'s grid."""
-    if grid is None:
-        return {"voi_plan": np.full(steps, math.nan), "mean_voi_plan": math.nan,
-                "q_plan": np.full((steps, 7), math.nan), "gamma_plan": np.full(steps, math.nan),
-                "target_voi": math.nan}
-    arc, rates, gamma, voi, limits = grid
-    budget = rates * dt
-    turn = limits.gamma_rate * dt * (1 + 1e-12)
-    # cumulative per-joint travel from the arc's first point (the planner does not wrap round a closed arc)
-    along = np.vstack([np.zeros((1, 7)), np.cumsum(np.abs(np.diff(arc.q, axis=0)), axis=0)])
-    best_cell = np.unravel_index(int(np.argmin(voi)), voi.shape)
-    ends = np.unique(np.r_[np.linspace(0, len(arc.q) - 1, targets).round().astype(int), best_cell[0]])
-    g_start = int(np.argmin(np.abs(gamma - gamma0)))
-    best: tuple | None = None
-    for target in ends:
-        path = _arc_path(along, arc.start_index, int(target), budget, steps)
-        for mode in ("greedy", "target"):
-            g_path = _gamma_path(voi, gamma, path, g_start, turn, int(np.argmin(voi[target])), mode)
-            values = voi[path, g_path]
-            if best is None or values.mean() < best[0].mean():
-                best = (values, path, g_path, target)
-    assert best is not None
-    values, path, g_path, target = best
-    return {"voi_plan": values, "mean_voi_plan": float(values.mean()), "q_plan": arc.q[path],
-            "gamma_plan": gamma[g_path], "target_voi": float(voi[target].min())}
-
-def _arc_path(along: np.ndarray, start: int, target: int, budget: np.ndarray, steps: int) -> np.ndarray:
-    """Arc index after each step: as far towards ``target`` as every joint's budget per step allows."""
-    path = np.empty(steps, dtype=np.int64)
-    i = start
-    for k in range(steps):
-        if target > i:
-            reach = min(int(np.searchsorted(along[:, j], along[i, j] + budget[j], side="right")) - 1
-                        for j in range(along.shape[1]))
-            i = min(max(reach, i), target)
-        elif target < i:
-            reach = max(int(np.searchsorted(along[:, j], along[i, j] - budget[j], side="left"))
-                        for j in range(along.shape[1]))
-            i = max(min(reach, i), target)
-        path[k] = i
-    return path
-
-
-def _gamma_path(voi: np.ndarray, gamma: np.ndarray, path: np.ndarray, g: int, turn: float, g_target: int,
-                mode: str) -> np.ndarray:
-    """Gamma index after each step, turning at most ``turn`` per step (greedy, or towards ``g_target``)."""
-    out = np.empty(len(path), dtype=np.int64)
-    for k, i in enumerate(path):
-        lo = int(np.searchsorted(gamma, gamma[g] - turn, side="left"))
-        hi = int(np.searchsorted(gamma, gamma[g] + turn, side="right"))
-        if mode == "greedy":
-            g = lo + int(np.argmin(voi[i, lo:hi]))
-        else:
-            g = min(max(g_target, lo), hi - 1)
-        out[k] = g
-    return out
-
-
 def _start_voi(robot: MultiBackboneRobot | None, q0: ArrayLike, gamma0: float, cone: LensCone | None) -> float:
     robot = MultiBackboneRobot() if robot is None else robot
     return float(occlusion_details(robot, np.asarray(q0, dtype=float), float(gamma0), cone or LensCone())["voi"])
 
 
-def _arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, caller):
-    """Checked inputs, the arc of q0 and VOI over (arc points x gammas that keep the tip in view); None if no
-    gamma sees the tip. Returns (arc, joint rate limits, feasible gammas, VOI (m, g), limits)."""
-    robot = MultiBackboneRobot() if robot is None else robot
-    if robot.dof != 7:
-        raise ValueError(f"robot: {caller} needs a 7-DoF robot (a one-dimensional self-motion arc); "
-                         f"got dof={robot.dof}")
-    limits = OcclusionLimits() if limits is None else limits
-    cone = LensCone() if cone is None else cone
-    q0 = as_finite(q0, (7,), "q0")
-    dt = positive(dt, "dt")
-    if dt > 0.1:
-        raise ValueError(f"dt must be in (0, 0.1] s; got {dt!r}")
-    positive_int(steps, "steps")
-    resolution = positive(gamma_resolution, "gamma_resolution")
-    if resolution > 0.1:
-        raise ValueError(f"gamma_resolution must be in (0, 0.1] rad; got {gamma_resolution!r}")
-    visibility = visibility_fraction(visibility)
-    tip, _ = robot.forward_kinematics(q0)
-    gamma = gamma_grid(float(gamma0), resolution)
-    gamma = gamma[cone_coordinates(tip, gamma, cone)["angle"] <= visibility * cone.beta]
-    if len(gamma) == 0:
-        return None
-    arc = trace_self_motion(robot, q0, limits, step=TRACE_STEP)
-    voi = occlusion_details(robot, arc.q[:, None, :], gamma[None, :], cone)["voi"]
-    return arc, np.asarray(limits.rate_limit, dtype=float)[:7], gamma, voi, limits
-
-
 def _bound_job(job: dict) -> dict:
     """Bound and plan of one start from one traced arc and VOI grid (the expensive part, done once)."""
     robot, q0, dt, steps = job["robot"], job["q0"], float(job["dt"]), int(job["steps"])
-    grid = _arc_grid(robot, q0, job["limits"], dt, steps, 0.0, job["visibility"], job["cone"], GAMMA_RESOLUTION,
+    grid = arc_grid(robot, q0, job["limits"], dt, steps, 0.0, job["visibility"], job["cone"], GAMMA_RESOLUTION,
                      "env_hold_rate_bound")
     result = _bound(grid, robot, q0, dt, steps, 0.0, job["cone"], GAMMA_RESOLUTION)
-    plan = _plan(grid, dt, steps, 0.0, PLAN_TARGETS)
+    plan = plan_on_grid(grid, dt, steps, 0.0, PLAN_TARGETS)
     result["voi_bound"] = result["voi_bound"].tolist()
     result["voi_plan"] = plan["voi_plan"].tolist()
     result["mean_voi_plan"] = plan["mean_voi_plan"]

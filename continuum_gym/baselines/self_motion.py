@@ -9,14 +9,13 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from continuum_gym.baselines import OcclusionLimits
-from continuum_gym.evaluation.optimum.workers import positive_int
+from continuum_gym.baselines.occlusion import OcclusionLimits
 from continuum_gym.robots import MultiBackboneRobot
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.linalg import damped_gram_solve
 from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 from continuum_gym.robots.rotations import orientation_error
-from continuum_gym.validation import as_finite, positive
+from continuum_gym.validation import as_finite, integer, positive
 
 # Self-motion tracing: joint-space metric scales the insertion (m) by this length to compare with rad.
 INSERTION_SCALE = 0.02
@@ -273,7 +272,7 @@ def trace_self_motion(robot: MultiBackboneRobot, q0: ArrayLike, limits: Occlusio
     if q0.shape != (7,):
         raise ValueError(f"q0 must have shape (7,); got {q0.shape}")
     step = positive(step, "step", "rad")
-    max_steps = positive_int(max_steps, "max_steps")
+    max_steps = integer(max_steps, "max_steps", low=1)
     tolerance = positive(tolerance, "tolerance", "m or rad")
     lower, upper = limit_arrays(limits)
     if np.any(q0 < lower) or np.any(q0 > upper):
