@@ -50,8 +50,8 @@ def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLim
     far along the arc towards the target as every joint's rate limit allows (so the tip pose is held and no
     joint rate is exceeded), while the endoscope turns by at most ``gamma_rate * dt`` per step, either greedily
     (the lowest VOI within reach at the new arc point) or towards the target's best gamma; the best of these
-    trajectories by mean VOI is returned. The planner knows the whole arc in advance: it is an offline
-    reference, like the hold optimum, not a controller a policy could run.
+    trajectories by mean VOI is returned. It needs only the start, the robot, the cone and the limits (about 1 s
+    of Python), so an env can plan when an episode starts (OcclusionAvoidance's ``arc_plan`` option).
 
     Returns:
         dict: ``voi_plan`` (steps,), ``mean_voi_plan``, ``q_plan`` (steps, 7), ``gamma_plan`` (steps,),

@@ -313,8 +313,11 @@ class BatchedCore(abc.ABC):
 
     def measured_joints(self, row: int) -> np.ndarray:
         """A copy of a row's joints as its sensors read them (the true ones without a model error)."""
-        source = self.q if self._mismatch is None else self._mismatch.arrays.q_meas
-        return source[row].copy()
+        return self.sensed_joints()[row].copy()
+
+    def sensed_joints(self) -> np.ndarray:
+        """Every row's joints as the sensors read them (N, dof): the core's own array, not a copy."""
+        return self.q if self._mismatch is None else self._mismatch.arrays.q_meas
 
     def _reset_mismatch(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
         if self._mismatch is not None:

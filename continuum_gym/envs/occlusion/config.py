@@ -61,6 +61,10 @@ class OcclusionConfig(EnvConfig):
     visibility_guard: float | None = field(default=0.69, metadata=spec(
         unit="fraction of the cone half-angle", doc="the residual's endoscope rotation is cut where it would carry "
         "the tip beyond this angle from the view axis (in (0, 1); `None`: off)", type_name="float or None"))
+    arc_plan: bool = field(default=False, metadata=spec(
+        doc="on hold tasks the residual's base tracks a trajectory along the self-motion arc planned when the "
+            "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks keep the base. "
+            "Needs a `base_controller`", type_name="bool"))
     control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
                                                           type_name="float"))
     substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
@@ -111,6 +115,13 @@ class OcclusionConfig(EnvConfig):
         check_common(self)
         check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
+        if not isinstance(self.arc_plan, bool) and type(self.arc_plan).__module__ != "numpy" \
+                or str(self.arc_plan) not in ("True", "False"):
+            raise ValueError(f"arc_plan must be True or False; got {describe(self.arc_plan)}")
+        set_(self, "arc_plan", bool(self.arc_plan))
+        if self.arc_plan and self.base_controller is None:
+            raise ValueError("arc_plan=True needs a base_controller (the plan is tracked on top of it); "
+                             "got base_controller=None")
         if self.visibility_guard is not None:
             if isinstance(self.visibility_guard, str):
                 raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "

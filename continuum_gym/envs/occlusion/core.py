@@ -34,6 +34,7 @@ from continuum_gym.envs.occlusion.kernel import (
     occlusion_step_batch,
 )
 from continuum_gym.envs.occlusion.outputs import OBSERVATION, Flag, Metric
+from continuum_gym.envs.occlusion.plan_base import ArcPlanBase
 from continuum_gym.envs.occlusion.spec import SPEC as OCCLUSION_SPEC
 from continuum_gym.envs.occlusion.tasks import VISIBILITY_FRACTION
 from continuum_gym.envs.single import ContinuumEnv
@@ -144,6 +145,7 @@ class OcclusionCore(BatchedCore):
         self._out = OcclusionOutputs(self.base_cmd, self.base_info, self.obs, self.metrics, self.terms, self.rewards,
                                      self.flags)
         self._model = self.kernel_model()
+        self._planner: ArcPlanBase | None = ArcPlanBase(self) if config.arc_plan else None
 
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params
@@ -168,6 +170,16 @@ class OcclusionCore(BatchedCore):
         self.gamma[rows] = fresh.start_gamma
         self._reset_mismatch(rows, task_ids)
         self.observe_rows(rows)
+        if self._planner is not None:
+            self._planner.reset_rows(rows)
+
+    def step(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._planner is None:
+            return super().step(actions, active)
+        sent, planned = self._planner.actions(actions, active)
+        out = super().step(sent, active)
+        self._planner.after_step(actions, planned)
+        return out
 
     def step_values(self) -> dict:
         """Per-step values the evaluation reduces to episode metrics (``OCCLUSION_SPEC.episode_metrics``)."""

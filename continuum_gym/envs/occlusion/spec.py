@@ -32,7 +32,8 @@ SPEC = register_env(EnvSpec(
     ),
     task_sets=(TaskSet("hold"), TaskSet("random"), TaskSet("circle", episodes=1)),
     diagnostics=("visibility_guarded_fraction",),
-    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target"),
+    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "observe_target",
+                 "arc_plan"),
     references=(ReferenceRow("offline_optimum", "hold_test", "optimum_voi", "mean_voi", "per_task", "hold",
                              "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"),
                 # the optimum is a configuration; an episode starts elsewhere and travels at the rate limits

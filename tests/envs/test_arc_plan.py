@@ -1,0 +1,109 @@
+"""OcclusionAvoidance's ``arc_plan``: on hold tasks the base tracks ``hold_arc_plan``'s trajectory (computed here
+independently, in the kinematics alone), other tasks are untouched to the bit, the policy pays only for its own
+action, and bad values are rejected by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from continuum_gym.baselines.arc_plan import hold_arc_plan
+from continuum_gym.envs.columns import at
+from continuum_gym.envs.occlusion.config import OcclusionConfig
+from continuum_gym.envs.occlusion.core import OcclusionCore
+from continuum_gym.envs.occlusion.outputs import OBS, Metric
+
+GUARD = 0.69
+KW = dict(task_split="validation", residual_scale=2.0, visibility_guard=GUARD)
+IDS = np.arange(3)
+
+
+def _run(core: OcclusionCore, ids: np.ndarray, actions=None, steps: int | None = None):
+    core.reset_rows(np.arange(len(ids)), ids)
+    active = np.ones(len(ids), dtype=np.uint8)
+    zero = np.zeros((len(ids), core.dof + 1))
+    voi, terms = [], []
+    for k in range(steps or int(core.tasks.duration[0])):
+        core.step(zero if actions is None else actions(k), active)
+        voi.append(core.metrics[:, Metric.VOI].copy())
+        terms.append(core.terms.copy())
+    return np.array(voi), np.array(terms)
+
+
+@pytest.fixture(scope="module")
+def planned_hold():
+    core = OcclusionCore(len(IDS), task="hold", arc_plan=True, **KW)
+    core.reset_rows(np.arange(len(IDS)), IDS)
+    starts = core.q.copy()
+    plans = [hold_arc_plan(core.robot, q0, core.limits, visibility=GUARD, cone=core.cone,
+                           steps=int(core.tasks.duration[0])) for q0 in starts]
+    return core, plans
+
+
+def test_zero_action_executes_the_plan(planned_hold):
+    core, plans = planned_hold
+    first = at(OBS.base_command, core.robot.n_segments)
+    width = core.dof + 1
+    # the observation's base block at reset is the plan's first step, from the start
+    expected = np.stack([np.append(p["q_plan"][0], p["gamma_plan"][0]) for p in plans])
+    expected = expected - np.concatenate([core.q, core.gamma[:, None]], axis=1)
+    np.testing.assert_allclose(core.obs[:, first:first + width], expected / core.control_dt / core.rate_scale_vec,
+                               atol=1e-9)
+    voi, terms = _run(core, IDS)
+    planned = np.array([p["mean_voi_plan"] for p in plans])
+    # the env's 1 ms substeps with the projected gradient underneath execute the plan to within about 2e-3 VOI
+    np.testing.assert_allclose(voi.mean(axis=0), planned, atol=2e-3)
+    assert np.all(terms[:, :, 4] == 0.0)  # a zero action pays no action penalty, though the kernel got the plan's
+    assert np.max(core.metrics[:, Metric.TIP_ERROR]) < 2e-4
+
+
+def test_plan_beats_the_projected_gradient_on_hold():
+    plain = OcclusionCore(len(IDS), task="hold", **KW)
+    voi_plain, _ = _run(plain, IDS)
+    planned = OcclusionCore(len(IDS), task="hold", arc_plan=True, **KW)
+    voi_plan, _ = _run(planned, IDS)
+    assert voi_plan.mean() < voi_plain.mean() - 0.02
+
+
+def test_moving_targets_are_untouched_to_the_bit():
+    rng = np.random.default_rng(3)
+    actions = np.clip(rng.normal(0.0, 0.3, (40, 4, 8)), -1.0, 1.0)
+    ids = np.arange(4)
+    out = []
+    for flag in (False, True):
+        core = OcclusionCore(4, task="random", arc_plan=flag, **KW)
+        voi, terms = _run(core, ids, lambda k: actions[k], steps=40)
+        out.append((voi, terms, core.q.copy(), core.obs.copy(), core.rewards.copy()))
+    for a, b in zip(*out, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_policy_pays_for_its_own_action():
+    core = OcclusionCore(2, task="hold", arc_plan=True, **KW)
+    action = np.full((2, 8), 0.25)
+    _, terms = _run(core, IDS[:2], lambda k: action, steps=3)
+    expected = -core.weights["action"] * np.sum(action ** 2, axis=1) / 8
+    np.testing.assert_allclose(terms[-1][:, 4], expected, rtol=1e-12)
+    np.testing.assert_allclose(core.rewards, core.terms.sum(axis=1), rtol=1e-12, atol=1e-15)
+
+
+def test_mixed_tasks_plan_only_the_holds():
+    core = OcclusionCore(4, task="mixed", arc_plan=True, **KW)
+    plain = OcclusionCore(4, task="mixed", **KW)
+    ids = np.arange(4)  # even ids hold, odd ids follow a random trajectory
+    voi_plan, _ = _run(core, ids, steps=30)
+    voi_plain, _ = _run(plain, ids, steps=30)
+    np.testing.assert_array_equal(voi_plan[:, 1::2], voi_plain[:, 1::2])
+    assert not np.array_equal(voi_plan[:, 0::2], voi_plain[:, 0::2])
+
+
+@pytest.mark.parametrize("value", ["yes", 1, 0.0, None])
+def test_bad_arc_plan_is_named(value):
+    with pytest.raises(ValueError, match="arc_plan"):
+        OcclusionConfig(arc_plan=value)
+
+
+def test_arc_plan_needs_a_base():
+    with pytest.raises(ValueError, match="arc_plan.*base_controller"):
+        OcclusionConfig(arc_plan=True, base_controller=None)
+    assert OcclusionConfig(arc_plan=np.bool_(True)).arc_plan is True
