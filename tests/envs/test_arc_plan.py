@@ -107,3 +107,14 @@ def test_arc_plan_needs_a_base():
     with pytest.raises(ValueError, match="arc_plan.*base_controller"):
         OcclusionConfig(arc_plan=True, base_controller=None)
     assert OcclusionConfig(arc_plan=np.bool_(True)).arc_plan is True
+
+
+def test_no_plan_under_a_model_error():
+    """The plans run along the visibility guard's edge, which a mismatched tip crosses: every row keeps the base."""
+    out = []
+    for flag in (False, True):
+        core = OcclusionCore(2, task="hold", arc_plan=flag, model_error="mild", **KW)
+        voi, terms = _run(core, IDS[:2], steps=20)
+        out.append((voi, terms, core.q.copy(), core.obs.copy()))
+    for a, b in zip(*out, strict=True):
+        np.testing.assert_array_equal(a, b)

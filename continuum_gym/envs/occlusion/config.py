@@ -63,8 +63,8 @@ class OcclusionConfig(EnvConfig):
         "the tip beyond this angle from the view axis (in (0, 1); `None`: off)", type_name="float or None"))
     arc_plan: bool = field(default=False, metadata=spec(
         doc="on hold tasks the residual's base tracks a trajectory along the self-motion arc planned when the "
-            "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks keep the base. "
-            "Needs a `base_controller`", type_name="bool"))
+            "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks, and every task "
+            "under a `model_error`, keep the base. Needs a `base_controller`", type_name="bool"))
     control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
                                                           type_name="float"))
     substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
