@@ -106,7 +106,14 @@ def test_bad_arc_plan_is_named(value):
 def test_arc_plan_needs_a_base():
     with pytest.raises(ValueError, match="arc_plan.*base_controller"):
         OcclusionConfig(arc_plan=True, base_controller=None)
-    assert OcclusionConfig(arc_plan=np.bool_(True)).arc_plan is True
+    assert OcclusionConfig(arc_plan=np.bool_(True), residual_scale=2.0).arc_plan is True
+
+
+@pytest.mark.parametrize("scale", [0.3, 1.99])
+def test_arc_plan_needs_the_reach_of_its_correction(scale):
+    """The plan's correction of the base reaches twice the rate limits: a smaller residual scale would clip it."""
+    with pytest.raises(ValueError, match="arc_plan.*residual_scale >= 2.*got"):
+        OcclusionConfig(arc_plan=True, residual_scale=scale)
 
 
 def test_no_plan_under_a_model_error():

@@ -64,7 +64,8 @@ class OcclusionConfig(EnvConfig):
     arc_plan: bool = field(default=False, metadata=spec(
         doc="on hold tasks the residual's base tracks a trajectory along the self-motion arc planned when the "
             "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks, and every task "
-            "under a `model_error`, keep the base. Needs a `base_controller`", type_name="bool"))
+            "under a `model_error`, keep the base. Needs a `base_controller` and `residual_scale` >= 2",
+        type_name="bool"))
     control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
                                                           type_name="float"))
     substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
@@ -122,6 +123,10 @@ class OcclusionConfig(EnvConfig):
         if self.arc_plan and self.base_controller is None:
             raise ValueError("arc_plan=True needs a base_controller (the plan is tracked on top of it); "
                              "got base_controller=None")
+        if self.arc_plan and self.residual_scale < 2.0:
+            # the plan's correction (plan rate - base rate) reaches twice the rate limits, and is sent as residual
+            raise ValueError(f"arc_plan=True needs residual_scale >= 2 (the plan's correction of the base, up to "
+                             f"twice the rate limits, must fit in the residual's reach); got {self.residual_scale!r}")
         if self.visibility_guard is not None:
             if isinstance(self.visibility_guard, str):
                 raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "
