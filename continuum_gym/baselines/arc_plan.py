@@ -62,7 +62,7 @@ def hold_arc_plan(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionLim
 
 
 def plan_on_grid(grid: tuple | None, dt: float, steps: int, gamma0: float, targets: int) -> dict:
-    """``hold_arc_plan`` on the checked inputs and ``_arc_grid``'s grid."""
+    """``hold_arc_plan`` on the checked inputs and ``arc_grid``'s grid."""
     if grid is None:
         return {"voi_plan": np.full(steps, math.nan), "mean_voi_plan": math.nan,
                 "q_plan": np.full((steps, 7), math.nan), "gamma_plan": np.full(steps, math.nan),
@@ -120,7 +120,9 @@ def _gamma_path(voi: np.ndarray, gamma: np.ndarray, path: np.ndarray, g: int, tu
     return out
 
 
-def arc_grid(robot, q0, limits, dt, steps, gamma0, visibility, cone, gamma_resolution, caller):
+def arc_grid(robot: MultiBackboneRobot | None, q0: ArrayLike, limits: OcclusionLimits | None, dt: float, steps: int,
+             gamma0: float, visibility: float, cone: LensCone | None, gamma_resolution: float, caller: str
+             ) -> tuple | None:
     """Checked inputs, the arc of q0 and VOI over (arc points x gammas that keep the tip in view); None if no
     gamma sees the tip. Returns (arc, joint rate limits, feasible gammas, VOI (m, g), limits)."""
     robot = MultiBackboneRobot() if robot is None else robot

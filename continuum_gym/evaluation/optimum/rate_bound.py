@@ -82,7 +82,7 @@ def hold_rate_bound(robot: MultiBackboneRobot, q0: ArrayLike, limits: OcclusionL
 
 
 def _bound(grid: tuple | None, robot, q0, dt: float, steps: int, gamma0: float, cone, resolution: float) -> dict:
-    """``hold_rate_bound`` on the checked inputs and ``_arc_grid``'s grid."""
+    """``hold_rate_bound`` on the checked inputs and ``arc_grid``'s grid."""
     start_voi = _start_voi(robot, q0, gamma0, cone)
     if grid is None:
         return {"voi_bound": np.full(steps, math.nan), "mean_voi_bound": math.nan, "static_voi": math.nan,
