@@ -15,7 +15,7 @@ from continuum_gym.envs.config import (
     resolve_robot,
     spec,
 )
-from continuum_gym.validation import choice, describe, fraction
+from continuum_gym.validation import boolean, choice, describe, fraction
 
 #: The built-in task families' names (the paper's ``circle`` exists only in the test split), here rather than
 #: in ``tasks.py`` so that the config (and ``continuum-gym --help``) does not import the task generators.
@@ -116,10 +116,7 @@ class OcclusionConfig(EnvConfig):
         check_common(self)
         check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
-        if not isinstance(self.arc_plan, bool) and type(self.arc_plan).__module__ != "numpy" \
-                or str(self.arc_plan) not in ("True", "False"):
-            raise ValueError(f"arc_plan must be True or False; got {describe(self.arc_plan)}")
-        set_(self, "arc_plan", bool(self.arc_plan))
+        set_(self, "arc_plan", boolean(self.arc_plan, "arc_plan"))
         if self.arc_plan and self.base_controller is None:
             raise ValueError("arc_plan=True needs a base_controller (the plan is tracked on top of it); "
                              "got base_controller=None")

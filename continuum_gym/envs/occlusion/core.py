@@ -145,7 +145,9 @@ class OcclusionCore(BatchedCore):
         self._out = OcclusionOutputs(self.base_cmd, self.base_info, self.obs, self.metrics, self.terms, self.rewards,
                                      self.flags)
         self._model = self.kernel_model()
-        self._planner: ArcPlanBase | None = ArcPlanBase(self) if config.arc_plan else None
+        # no plans under a model error: they run along the guard's edge, which the true tip crosses (plan_base.py)
+        planned = config.arc_plan and self._mismatch is None
+        self._planner: ArcPlanBase | None = ArcPlanBase(self) if planned else None
 
     def kernel_model(self) -> tuple:
         return self.robot.kernel_args(), self.controller.params

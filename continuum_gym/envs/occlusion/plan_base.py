@@ -12,7 +12,7 @@ plus the policy's own action, clipped to [-1, 1]. Every other row keeps the proj
 What a policy sees and pays for is its own part: the observation's ``base_command`` block holds the plan's
 command on planned rows, and the action penalty is computed on the policy's action, not on the sum.
 
-Under a model error (``model_error`` not "none") no row is planned: the plans run along the visibility guard's
+Under a model error (``model_error`` not "none") the core makes no planner: the plans run along the visibility guard's
 edge, which the true tip then crosses (measured on validation holds with a zero residual: the tip in view on
 0.59 of the steps with the ``mild`` error and 0.51 with ``severe``, against 1.0 for the projected gradient), so
 every row keeps the base.
@@ -31,7 +31,6 @@ import numpy as np
 
 from continuum_gym.baselines.arc_plan import VISIBILITY, hold_arc_plan
 from continuum_gym.envs.columns import at
-from continuum_gym.envs.model_error import is_active
 from continuum_gym.envs.occlusion.kernel import OBS_LIMIT, REWARD_TERMS
 from continuum_gym.envs.occlusion.outputs import OBS
 
@@ -61,7 +60,6 @@ class ArcPlanBase:
         self.visibility = VISIBILITY if guard is None else float(guard)
         self._key = repr((core.robot, core.cone, core.limits, core.control_dt, self.visibility))
         self._first = at(OBS.base_command, core.robot.n_segments)
-        self.enabled = not is_active(core.config.model_error)
 
     # ------------------------------------------------------------------ reset
     def reset_rows(self, rows: np.ndarray) -> None:
@@ -69,7 +67,7 @@ class ArcPlanBase:
         core = self.core
         tasks = core.tasks
         self.on[rows] = False
-        for r in rows if self.enabled else ():
+        for r in rows:
             if tasks.n_knots[r] != 0 or np.any(tasks.amp[r] * tasks.omega[r][:, None] != 0.0):
                 continue
             q0 = self._joints()[r]
