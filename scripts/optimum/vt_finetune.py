@@ -37,6 +37,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="added to the policy's log std (gSDE) before fine-tuning: < 0 explores less")
     parser.add_argument("--overlap-polish", type=float, default=None,
                         help="fine-tune (and write the run's config) with the env's overlap_polish option (Campaign 8)")
+    parser.add_argument("--train-without-polish", action="store_true",
+                        help="train without the env's overlap_polish even where the run's config sets it; the "
+                             "written config keeps it, so every tool evaluates the policy with it (Campaign 10)")
     parser.add_argument("--package-only", action="store_true",
                         help="only (re)write the run files around an existing <out>/model.zip (see package())")
     args = parser.parse_args(argv)
@@ -61,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), reward_weights=config["env_config"]["reward_weights"])
     if args.overlap_polish is not None:
         kwargs["overlap_polish"] = args.overlap_polish
+    if args.train_without_polish:  # Campaign 8: fine-tuning with the polish in the loop lost coverage
+        kwargs.pop("overlap_polish", None)
     hp = config["hyperparams"]
     venv = ContinuumSB3VecEnv(VIEW, int(hp["n_envs"]), seed=args.seed, task=args.task, task_split="train", **kwargs)
     venv = VecNormalize(VecMonitor(venv), norm_obs=False, norm_reward=True, gamma=float(hp["gamma"]))
@@ -84,6 +89,8 @@ def package(args: argparse.Namespace) -> None:
     ``config.yml`` with the total steps and a ``finetune`` block, ``command.txt`` with both commands. The source's
     learning curve (``evaluations.npz``) does not cover the fine-tuning: it is kept as ``evaluations_source.npz``."""
     config = yaml.safe_load((args.run / "config.yml").read_text())
+    if "finetune" in config:  # a fine-tune of a fine-tune: the earlier blocks stay, oldest first
+        config.setdefault("finetune_earlier", []).append(config.pop("finetune"))
     settings = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items() if k != "package_only"}
     config["finetune"] = {**settings, "learning_rate": f"lin_{args.lr:g}", "source_total_timesteps":
                           config["total_timesteps"]}
@@ -91,7 +98,7 @@ def package(args: argparse.Namespace) -> None:
     if args.overlap_polish is not None:  # the policy acts with the polish: every tool evaluates it so
         config["env_config"]["overlap_polish"] = args.overlap_polish
     (args.out / "config.yml").write_text(yaml.safe_dump(config, sort_keys=False))
-    for name in ("args.yml",):
+    for name in ("args.yml", "evaluations_source.npz"):
         if (args.run / name).exists():
             shutil.copy(args.run / name, args.out / name)
     if (args.run / "evaluations.npz").exists():
@@ -103,7 +110,8 @@ def package(args: argparse.Namespace) -> None:
         f"python scripts/optimum/vt_finetune.py <run> --out <out> --steps {args.steps:g} --lr {args.lr:g} "
         f"--task {args.task} {imports} --critic-steps {args.critic_steps:g} --seed {args.seed} "
         f"--log-std-shift {args.log_std_shift:g}"
-        + (f" --overlap-polish {args.overlap_polish:g}" if args.overlap_polish is not None else "") + "\n")
+        + (f" --overlap-polish {args.overlap_polish:g}" if args.overlap_polish is not None else "")
+        + (" --train-without-polish" if args.train_without_polish else "") + "\n")
 
 
 if __name__ == "__main__":
