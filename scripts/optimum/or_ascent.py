@@ -84,12 +84,15 @@ def observed_q(obs: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndar
 
 class OverlapLookahead:
     """``policy`` plus the step along the OR's gradient (at the policy's next configuration) that maximises the
-    OR predicted for the next configuration, among ``steps`` (action units; 0 keeps the policy's action)."""
+    OR predicted for the next configuration, among ``steps`` (action units; 0 keeps the policy's action).
+    ``coordinates``: the steps along each action axis (both signs) are candidates too, for OR maxima at a kink,
+    where the gradient's direction need not ascend (Campaign 10)."""
 
     def __init__(self, policy, config: dict, steps=(0.02, 0.05, 0.1, 0.2, 0.4), min_ratio: float = 0.0,
-                 h: float = 1e-4) -> None:
+                 h: float = 1e-4, coordinates: bool = False) -> None:
         self.inner = OverlapAscent(policy, config, 0.0, h=h)
         self.steps, self.min_ratio = tuple(float(s) for s in steps), float(min_ratio)
+        self.coordinates = bool(coordinates)
         env_config = config["env_config"]
         self.dt = float(env_config["control_dt"])
         self.rate = float(env_config["residual_scale"]) * ACTION_SCALE
@@ -126,8 +129,10 @@ class OverlapLookahead:
         norm = np.linalg.norm(direction, axis=1, keepdims=True)
         direction = np.divide(direction, norm, out=np.zeros_like(direction), where=norm > 0)
         chosen = action.copy()
-        for step in self.steps:
-            candidate = np.clip(action + step * direction, -1.0, 1.0)
+        directions = [direction] + ([sign * np.eye(6)[k] for k in range(6) for sign in (-1.0, 1.0)]
+                                    if self.coordinates else [])
+        for step, d in ((step, d) for d in directions for step in self.steps):
+            candidate = np.clip(action + step * d, -1.0, 1.0)
             value = self.predicted(rows, self.next_q(rows, q, candidate))
             better = (value > best) & (ratio_now >= self.min_ratio)
             chosen[better] = candidate[better]
@@ -177,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--min-ratio", type=float, default=0.0)
     parser.add_argument("--lookahead", type=float, nargs="*", default=None,
                         help="OverlapLookahead with these step sizes (action units); --gain is then ignored")
+    parser.add_argument("--coordinates", action="store_true",
+                        help="the lookahead also tries its steps along each action axis (Campaign 10)")
     parser.add_argument("--selection", action="store_true", help="pan_tilt ids 4096-5119 only")
     parser.add_argument("--model-error", default="none", help="the env's model_error (none, mild, severe): the "
                         "robot differs from the nominal model the base controller and the lookahead use")
@@ -184,13 +191,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     model, config = load_policy(args.run)
     kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), model_error=args.model_error)
+    kwargs.pop("overlap_polish", None)  # a run shipped with the env's polish is scored with this script's instead
     for gain in args.gain:
         if args.lookahead:
-            policy = OverlapLookahead(model, config, args.lookahead, min_ratio=args.min_ratio)
+            policy = OverlapLookahead(model, config, args.lookahead, min_ratio=args.min_ratio,
+                                      coordinates=args.coordinates)
         else:
             policy = OverlapAscent(model, config, gain, min_ratio=args.min_ratio) if gain else model
         summary, _ = val_eval.measure(VIEW, policy, kwargs, selection=args.selection)
-        row = dict(run=str(args.run), gain=gain, lookahead=args.lookahead, model_error=args.model_error,
+        row = dict(run=str(args.run), gain=gain, lookahead=args.lookahead, coordinates=args.coordinates,
+                   model_error=args.model_error,
                    min_ratio=args.min_ratio, selection=args.selection, **summary)
         print(json.dumps(row), flush=True)
         with args.out.open("a") as f:
