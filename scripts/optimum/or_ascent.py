@@ -129,14 +129,14 @@ class OverlapLookahead:
         norm = np.linalg.norm(direction, axis=1, keepdims=True)
         direction = np.divide(direction, norm, out=np.zeros_like(direction), where=norm > 0)
         chosen = action.copy()
-        directions = [direction] + ([sign * np.eye(6)[k] for k in range(6) for sign in (-1.0, 1.0)]
-                                    if self.coordinates else [])
-        for step, d in ((step, d) for d in directions for step in self.steps):
-            candidate = np.clip(action + step * d, -1.0, 1.0)
-            value = self.predicted(rows, self.next_q(rows, q, candidate))
-            better = (value > best) & (ratio_now >= self.min_ratio)
-            chosen[better] = candidate[better]
-            best = np.where(better, value, best)
+        axes = [sign * axis for axis in np.eye(6) for sign in (-1.0, 1.0)] if self.coordinates else []
+        for d in [direction, *axes]:
+            for step in self.steps:
+                candidate = np.clip(action + step * d, -1.0, 1.0)
+                value = self.predicted(rows, self.next_q(rows, q, candidate))
+                better = (value > best) & (ratio_now >= self.min_ratio)
+                chosen[better] = candidate[better]
+                best = np.where(better, value, best)
         return chosen.reshape(shape), state
 
 
@@ -200,8 +200,7 @@ def main(argv: list[str] | None = None) -> int:
             policy = OverlapAscent(model, config, gain, min_ratio=args.min_ratio) if gain else model
         summary, _ = val_eval.measure(VIEW, policy, kwargs, selection=args.selection)
         row = dict(run=str(args.run), gain=gain, lookahead=args.lookahead, coordinates=args.coordinates,
-                   model_error=args.model_error,
-                   min_ratio=args.min_ratio, selection=args.selection, **summary)
+                   model_error=args.model_error, min_ratio=args.min_ratio, selection=args.selection, **summary)
         print(json.dumps(row), flush=True)
         with args.out.open("a") as f:
             f.write(json.dumps(row) + "\n")

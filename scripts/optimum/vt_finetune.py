@@ -62,10 +62,10 @@ def main(argv: list[str] | None = None) -> int:
     config = yaml.safe_load((args.run / "config.yml").read_text())
     # the run's policy keywords (as evaluation takes them) and its reward, which fine-tuning keeps
     kwargs = dict(policy_env_kwargs(get_spec(VIEW), config), reward_weights=config["env_config"]["reward_weights"])
-    if args.overlap_polish is not None:
-        kwargs["overlap_polish"] = args.overlap_polish
     if args.train_without_polish:  # Campaign 8: fine-tuning with the polish in the loop lost coverage
         kwargs.pop("overlap_polish", None)
+    elif args.overlap_polish is not None:
+        kwargs["overlap_polish"] = args.overlap_polish
     hp = config["hyperparams"]
     venv = ContinuumSB3VecEnv(VIEW, int(hp["n_envs"]), seed=args.seed, task=args.task, task_split="train", **kwargs)
     venv = VecNormalize(VecMonitor(venv), norm_obs=False, norm_reward=True, gamma=float(hp["gamma"]))
