@@ -49,14 +49,19 @@ def hold_effort(q: ArrayLike, q_davinci: ArrayLike, residual_scale: float,
     controller = make_controller("dimension_reduced") if controller is None else controller
     q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
     p_t, R_t = DaVinciEndoscope().target_pose(np.atleast_2d(q_davinci))
-    effort = _EffortKernel(controller, residual_scale, control_dt)
+    effort = HoldEffort(controller, residual_scale, control_dt)
     return np.array([effort(q[k], p_t[k], R_t[k]) for k in range(len(q))])
 
 
-class _EffortKernel:
-    """The hold effort of one configuration towards one target pose, with its work arrays allocated once."""
+class HoldEffort:
+    """The hold effort of one configuration towards one target pose, with its work arrays allocated once.
 
-    def __init__(self, controller, residual_scale, control_dt=CONTROL_DT) -> None:
+    ``HoldEffort(controller, residual_scale)(q, p_target, R_target)`` is :func:`hold_effort` for one row, for an
+    optimiser that calls it many times (``holdable_optimum``); ``residual_scale`` is not validated here.
+    """
+
+    def __init__(self, controller: ViewTrackingController, residual_scale: float,
+                 control_dt: float = CONTROL_DT) -> None:
         from continuum_gym.envs.view_tracking import ACTION_SCALE
 
         self.robot, self.params = controller.robot.kernel_args(), controller.params
@@ -64,7 +69,7 @@ class _EffortKernel:
         self.control_dt = control_dt
         self.scratch, self.rates = make_view_scratch(), np.empty(6)
 
-    def __call__(self, q, p_target, R_target):
+    def __call__(self, q: ArrayLike, p_target: np.ndarray, R_target: np.ndarray) -> float:
         view_rates_kernel(np.ascontiguousarray(q, dtype=float), p_target, R_target, self.control_dt, self.robot,
                           self.params, self.scratch, self.rates)
         return float(np.max(np.abs(self.rates) / self.reach))
@@ -92,7 +97,7 @@ def holdable_optimum(q_star: ArrayLike, q_davinci: ArrayLike, residual_scale: fl
         return overlap_of_configuration(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], robot, frustum.tan_half,
                                         frustum.near, frustum.far)
 
-    effort_kernel = _EffortKernel(controller,
+    effort_kernel = HoldEffort(controller,
                                   positive(residual_scale, "residual_scale", "fraction of the action scale"))
 
     def effort(q, k):
