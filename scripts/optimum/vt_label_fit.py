@@ -71,6 +71,28 @@ def score(q: np.ndarray, targets: np.ndarray) -> dict:
             "holdable": float(100 * np.mean(effort <= 1.0))}
 
 
+def local_ascent(q: np.ndarray, targets: np.ndarray, maxfev: int) -> np.ndarray:
+    """Nelder-Mead on -OR from each configuration, ``maxfev`` evaluations each: what a local residual on top of
+    the fitted map could reach at most (it does not see the hold effort)."""
+    from scipy.optimize import minimize
+
+    from continuum_gym.evaluation.optimum.view import overlap_of_configuration
+    from continuum_gym.geometry.frustum import Frustum
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+
+    frustum, endoscope = Frustum(), ContinuumEndoscope()
+    robot, (lower, upper) = endoscope.kernel_args(), endoscope.joint_limits
+    p_a, R_a = DaVinciEndoscope().forward_kinematics(targets)
+    out = np.array(q, dtype=float)
+    for k in range(len(q)):
+        def objective(x, k=k):
+            x = np.ascontiguousarray(np.clip(x, lower, upper))
+            return -overlap_of_configuration(x, p_a[k], R_a[k], robot, frustum.tan_half, frustum.near, frustum.far)
+
+        out[k] = np.clip(minimize(objective, q[k], method="Nelder-Mead", options={"maxfev": maxfev}).x, lower, upper)
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     from continuum_gym.envs.view_tracking.tasks import view_tasks
     from continuum_gym.evaluation.rollout import make_core
@@ -82,6 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=4000, help="full-batch Adam steps")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None, help="JSON summary")
+    parser.add_argument("--local-fev", type=int, default=0,
+                        help="also score a local Nelder-Mead ascent of OR from the network's configurations")
     args = parser.parse_args(argv)
 
     data = np.load(args.labels)
@@ -102,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
                          "mlp_on_grid": score(decode(net(x_train), lower, upper), train_targets),
                          "mlp_validation": score(decode(net(x_val), lower, upper), val_targets),
                          "nearest_validation": score(data[f"q_{name}"][nearest], val_targets)}
+        if args.local_fev > 0:
+            q_local = local_ascent(decode(net(x_val), lower, upper), val_targets, args.local_fev)
+            summary[name]["mlp_validation_local"] = score(q_local, val_targets)
         print(name, json.dumps(summary[name]), flush=True)
     if args.out is not None:
         args.out.write_text(json.dumps(summary, indent=1) + "\n")
