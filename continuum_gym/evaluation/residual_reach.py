@@ -97,8 +97,7 @@ def holdable_optimum(q_star: ArrayLike, q_davinci: ArrayLike, residual_scale: fl
         return overlap_of_configuration(np.ascontiguousarray(q, dtype=float), p_a[k], R_a[k], robot, frustum.tan_half,
                                         frustum.near, frustum.far)
 
-    effort_kernel = HoldEffort(controller,
-                                  positive(residual_scale, "residual_scale", "fraction of the action scale"))
+    effort_kernel = HoldEffort(controller, positive(residual_scale, "residual_scale", "fraction of the action scale"))
 
     def effort(q, k):
         return effort_kernel(q, p_t[k], R_t[k])

@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from vt_label_fit import decode, encode, local_ascent, score
+from vt_label_fit import decode, encode, fit_mlp, local_ascent, score
 
 VIEW = "ContinuumGym/ViewTracking-v0"
 
@@ -24,26 +24,6 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 def inputs(targets: np.ndarray) -> np.ndarray:
     return np.stack([(targets[:, 0] - 0.065) / 0.015, targets[:, 1] / (math.pi / 3), targets[:, 2] / (math.pi / 3),
                      targets[:, 3] / (math.pi / 4)], axis=1)
-
-
-def fit(x: np.ndarray, y: np.ndarray, steps: int, batch: int, seed: int, width: int = 256):
-    import torch
-
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    net = torch.nn.Sequential(torch.nn.Linear(x.shape[1], width), torch.nn.Tanh(), torch.nn.Linear(width, width),
-                              torch.nn.Tanh(), torch.nn.Linear(width, y.shape[1]))
-    opt = torch.optim.Adam(net.parameters(), lr=1e-3)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, steps)
-    X, Y = torch.tensor(x, dtype=torch.float32), torch.tensor(y, dtype=torch.float32)
-    for _ in range(steps):
-        rows = torch.as_tensor(rng.integers(0, len(x), batch))
-        opt.zero_grad()
-        loss = torch.mean((net(X[rows]) - Y[rows]) ** 2)
-        loss.backward()
-        opt.step()
-        sched.step()
-    return lambda a: net(torch.tensor(a, dtype=torch.float32)).detach().numpy().astype(float)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -74,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     targets = np.concatenate([s["targets"] for s in slices])
     q = np.concatenate([s["q"] for s in slices])
     lower, upper = (np.asarray(b, dtype=float) for b in ContinuumEndoscope().joint_limits)
-    net = fit(inputs(targets), encode(q), args.steps, args.batch, args.seed, args.width)
+    net = fit_mlp(inputs(targets), encode(q), args.steps, args.seed, args.batch, args.width)
     summary: dict = {"slices": len(files), "labels": len(q),
                      "fit_rms": float(np.sqrt(np.mean((net(inputs(targets)) - encode(q)) ** 2)))}
     context = make_core(VIEW, 1, task="pan_tilt", task_split="validation").task_context

@@ -50,8 +50,8 @@ LOSS_TOLERANCE = 0.02
 SMOOTH_LIMIT = 0.5
 
 
-def offset_targets(G: int) -> tuple[np.ndarray, np.ndarray]:
-    """(G*G, 4) targets (yaw-major: index i*G + j is yaw_i, pitch_j) and the axis (G,)."""
+def offset_targets(G: int, L: float = COVERAGE_INSERTION, roll: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """(G*G, 4) targets at insertion L and roll (yaw-major: index i*G + j is yaw_i, pitch_j) and the axis (G,)."""
     if G % 2:
         raise ValueError("G must be even")
     axis = -math.pi / 3 + (np.arange(G) + 0.5) * (2 * math.pi / 3) / G
@@ -59,8 +59,7 @@ def offset_targets(G: int) -> tuple[np.ndarray, np.ndarray]:
     gap = np.min(np.abs(axis[:, None] - test_axis[None, :]))
     assert gap > 1e-6, f"offset grid touches the test grid (min axis gap {gap})"
     yaw, pitch = np.meshgrid(axis, axis, indexing="ij")
-    targets = np.stack([np.full(yaw.size, COVERAGE_INSERTION), yaw.ravel(), pitch.ravel(),
-                        np.zeros(yaw.size)], axis=1)
+    targets = np.stack([np.full(yaw.size, L), yaw.ravel(), pitch.ravel(), np.full(yaw.size, roll)], axis=1)
     return targets, axis
 
 

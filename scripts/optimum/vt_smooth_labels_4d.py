@@ -1,7 +1,7 @@
 """Smooth (continuation) ViewTracking-v0 optimum labels over the 4-D target space [L_dV, yaw, pitch, roll].
 
-Extends ``vt_smooth_labels.py`` (whose ``offset_targets``, ``Problem``, ``wrapdiff``, ``wrap_q``, ``metrics`` and
-``neighbour_pairs`` it imports) from the 2-D pan_tilt grid to a 4-D grid:
+Extends ``vt_smooth_labels.py`` (whose ``offset_targets``, ``Problem``, ``evaluate``, ``wrapdiff``, ``wrap_q``,
+``metrics`` and ``neighbour_pairs`` it imports) from the 2-D pan_tilt grid to a 4-D grid:
 
 * yaw/pitch: the G x G offset axis of ``offset_targets(G)`` (its no-test-grid assertion included), G = 40;
 * L_dV: ``--n-length`` values evenly from ``--length-min`` to ``--length-max`` (default 7: 0.050, 0.055, ..., 0.080);
@@ -60,6 +60,7 @@ from vt_smooth_labels import (
     LOSS_TOLERANCE,
     SMOOTH_LIMIT,
     Problem,
+    evaluate,
     metrics,
     neighbour_pairs,
     offset_targets,
@@ -78,13 +79,6 @@ def grid_axes(args) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lengths = np.linspace(args.length_min, args.length_max, args.n_length)
     rolls = args.roll_min + (np.arange(args.n_roll) + 0.5) * (args.roll_max - args.roll_min) / args.n_roll
     return axis, lengths, rolls
-
-
-def slice_targets(axis: np.ndarray, L: float, roll: float) -> np.ndarray:
-    """(G*G, 4) targets, yaw-major (index i*G + j is yaw_i, pitch_j) as offset_targets."""
-    yaw, pitch = np.meshgrid(axis, axis, indexing="ij")
-    n = yaw.size
-    return np.stack([np.full(n, L), yaw.ravel(), pitch.ravel(), np.full(n, roll)], axis=1)
 
 
 def outward(n: int, start: int) -> list[int]:
@@ -146,12 +140,6 @@ def solve_slice(problem: Problem, G: int, slice_anchor_q: list[np.ndarray], q_fi
         n_starts[k] = len(starts)
         prev = k
     return q_out, n_starts
-
-
-def evaluate(problem: Problem, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    overlaps = np.array([problem.overlap(q[k], k) for k in range(len(q))])
-    efforts = np.array([problem.effort(q[k], k) for k in range(len(q))])
-    return overlaps, efforts
 
 
 def covered(overlaps: np.ndarray, efforts: np.ndarray, holdable: bool) -> np.ndarray:
@@ -332,7 +320,7 @@ def main() -> None:
         if args.max_slices is not None and computed >= args.max_slices:
             break
         started = time.perf_counter()
-        targets = slice_targets(axis, lengths[k], rolls[m])
+        targets, _ = offset_targets(args.grid, lengths[k], rolls[m])
         problem = Problem(targets)
         if args.slice_anchors == "parent":
             neighbours = [parent[(k, m)]] if parent[(k, m)] is not None else []
