@@ -157,6 +157,7 @@ ENV_NAMING = {
     "continuum_gym.evaluation.optimum.occlusion": "the OcclusionAvoidance optimum (spec.optimum)",
     "continuum_gym.evaluation.optimum.rate_bound": "the OcclusionAvoidance hold tasks' rate-limited bound",
     "continuum_gym.evaluation.residual_reach": "ViewTracking's residual reach study",
+    "continuum_gym.agents.distilled_view": "ViewTracking's distilled-optimum base, a registered controller",
 }
 
 

@@ -31,7 +31,8 @@ from continuum_gym.validation import (
     positive,
 )
 
-__all__ = ["DaVinciEndoscope", "DaVinciKernelArgs", "ALPHA_CONVENTIONS", "davinci_pose", "stem_rotation"]
+__all__ = ["DaVinciEndoscope", "DaVinciKernelArgs", "ALPHA_CONVENTIONS", "davinci_pose", "stem_rotation",
+           "davinci_configuration"]
 
 #: Valid values of ``DaVinciEndoscope(alpha_convention=...)``.
 ALPHA_CONVENTIONS = ("eq2", "eq1")
@@ -61,6 +62,30 @@ def stem_rotation(yaw, pitch, roll, R):
     R[0, 2] = sy * cp
     R[1, 2] = -sp
     R[2, 2] = cy * cp
+
+
+@kernel(inline="always")
+def davinci_configuration(p_tgt, R_cam, alpha, le, out):
+    """The configuration [L_dV, yaw, pitch, roll] (4,) whose ``davinci_pose`` is (R_cam, p_tgt), into ``out``.
+
+    ``alpha`` is the signed viewing angle of ``DaVinciKernelArgs``, ``le`` the view distance (m). The exact
+    inverse for yaw, pitch in (-pi/2, pi/2) and roll in (-pi, pi]: the stem's z-axis is R_cam's y and z columns
+    turned back by alpha, L_dV the camera position's component along it.
+    """
+    ca, sa = math.cos(alpha), math.sin(alpha)
+    zx = -sa * R_cam[0, 1] + ca * R_cam[0, 2]
+    zy = -sa * R_cam[1, 1] + ca * R_cam[1, 2]
+    zz = -sa * R_cam[2, 1] + ca * R_cam[2, 2]
+    out[0] = (p_tgt[0] - le * R_cam[0, 2]) * zx + (p_tgt[1] - le * R_cam[1, 2]) * zy + \
+        (p_tgt[2] - le * R_cam[2, 2]) * zz
+    yaw = math.atan2(zx, zz)
+    pitch = math.asin(min(max(-zy, -1.0), 1.0))
+    cy, sy, cp, sp = math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch)
+    # the stem's x-axis (R_cam's first column) is cos(roll) [cy, 0, -sy] + sin(roll) [sy sp, cp, cy sp]
+    out[1] = yaw
+    out[2] = pitch
+    out[3] = math.atan2(R_cam[0, 0] * sy * sp + R_cam[1, 0] * cp + R_cam[2, 0] * cy * sp,
+                        R_cam[0, 0] * cy - R_cam[2, 0] * sy)
 
 
 @kernel(borrows=True)
@@ -101,6 +126,12 @@ def _stem_batch(Q, out):
 def _pose_batch(Q, dv, clip, p_cam, R_cam, p_tgt):
     for i in range(Q.shape[0]):
         davinci_pose(Q[i], dv, clip, p_cam[i], R_cam[i], p_tgt[i])
+
+
+@kernel
+def _configuration_batch(P, R, alpha, le, out):
+    for i in range(P.shape[0]):
+        davinci_configuration(P[i], R[i], alpha, le, out[i])
 
 
 class DaVinciEndoscope:
@@ -216,6 +247,24 @@ class DaVinciEndoscope:
         """
         _, w_R_cam, p_t = self._poses(q)
         return p_t, w_R_cam
+
+    def configuration_of(self, p_target: ArrayLike, R_target: ArrayLike) -> np.ndarray:
+        """The configuration (..., 4) whose ``target_pose`` is (p_target (..., 3) in m, R_target (..., 3, 3)).
+
+        The inverse of ``target_pose`` for yaw and pitch in (-pi/2, pi/2) (the joint ranges are within) and
+        roll in (-pi, pi]; a pose no configuration reaches gives the configuration of its nearest stem axis.
+        """
+        p = np.asarray(p_target, dtype=float)
+        R = np.asarray(R_target, dtype=float)
+        if p.shape[-1:] != (3,) or R.shape[-2:] != (3, 3) or p.shape[:-1] != R.shape[:-2]:
+            raise ValueError(f"p_target must be (..., 3) and R_target (..., 3, 3) with the same leading shape; got "
+                             f"{p.shape} and {R.shape}")
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(R))):
+            raise ValueError("p_target and R_target must be finite")
+        out = np.empty(p.shape[:-1] + (DOF,))
+        _configuration_batch(np.ascontiguousarray(p.reshape(-1, 3)), np.ascontiguousarray(R.reshape(-1, 3, 3)),
+                             self._args.alpha, self._Le, out.reshape(-1, DOF))
+        return out
 
     def target_point(self, q: ArrayLike) -> np.ndarray:
         """Visual target point ``w_p_dVt`` (..., 3) in m (eq 2)."""

@@ -156,7 +156,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pending", default=None, metavar="TAG",
                         help="also score every finished run of <root>/runs/TAG/ that has no final result yet")
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
+    parser.add_argument("--base-controller", default=None,
+                        help="with --base: this (e.g. registered) controller instead of the env's headline baseline")
+    parser.add_argument("--polish", type=float, default=None, help="with --base: the env's overlap_polish")
+    parser.add_argument("--import", dest="imports", action="append", default=[],
+                        help="plug-in module to import first (registered controllers, tasks)")
     args = parser.parse_args(argv)
+    import importlib
+
+    for module in args.imports:
+        importlib.import_module(module)
     if args.pending:
         args.tag = args.tag or args.pending
         args.targets += pending(args.root, args.pending)
@@ -169,7 +178,10 @@ def main(argv: list[str] | None = None) -> int:
         start = time.time()
         if target is None:
             env_id = args.base
-            model, kwargs, run, step, name = None, {"base_controller": get_spec(env_id).headline_baseline}, None, None, "base"
+            kwargs = {"base_controller": args.base_controller or get_spec(env_id).headline_baseline}
+            if args.polish is not None:
+                kwargs.update(overlap_polish=args.polish, residual_scale=3.0)
+            model, run, step, name = None, None, None, "base"
         else:
             model, config, run, step = load(target.expanduser().resolve())
             env_id = config["env_id"]

@@ -56,7 +56,9 @@ def fit_mlp(x: np.ndarray, y: np.ndarray, steps: int, seed: int, batch: int | No
         loss.backward()
         opt.step()
         sched.step()
-    return lambda inputs: net(torch.tensor(inputs, dtype=torch.float32)).detach().numpy().astype(float)
+    fitted = lambda inputs: net(torch.tensor(inputs, dtype=torch.float32)).detach().numpy().astype(float)  # noqa: E731
+    fitted.net = net  # the torch module, for saving its weights
+    return fitted
 
 
 def score(q: np.ndarray, targets: np.ndarray) -> dict:

@@ -44,6 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--local-fev", type=int, default=300)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None, help="JSON summary")
+    parser.add_argument("--save", type=Path, default=None, help="the fitted weights (npz: W0, b0, W1, b1, W2, b2)")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
 
@@ -57,13 +58,18 @@ def main(argv: list[str] | None = None) -> int:
     net = fit_mlp(inputs(targets), encode(q), args.steps, args.seed, args.batch, args.width)
     summary: dict = {"slices": len(files), "labels": len(q),
                      "fit_rms": float(np.sqrt(np.mean((net(inputs(targets)) - encode(q)) ** 2)))}
+    if args.save is not None:
+        layers = [m for m in net.net if isinstance(m, torch.nn.Linear)]
+        np.savez(args.save, **{f"{kind}{k}": getattr(m, name).detach().numpy().astype(np.float64)
+                               for k, m in enumerate(layers) for kind, name in (("W", "weight"), ("b", "bias"))})
     context = make_core(VIEW, 1, task="pan_tilt", task_split="validation").task_context
     for task in ("pan_tilt", "static"):
         val = view_tasks(task, "validation", np.arange(args.count), context).centre
         q_net = decode(net(inputs(val)), lower, upper)
         k = args.optimum_count
-        summary[task] = {"ids": f"validation 0-{args.count - 1}", "network": score(q_net, val),
-                         "network_local": score(local_ascent(q_net, val, args.local_fev), val)}
+        summary[task] = {"ids": f"validation 0-{args.count - 1}", "network": score(q_net, val)}
+        if args.local_fev > 0:
+            summary[task]["network_local"] = score(local_ascent(q_net, val, args.local_fev), val)
         if k > 0:
             optimum = view_tracking_optimum(val[:k], effort="standard", workers=1, baselines=False)["overlap"]
             summary[task][f"network_first_{k}"] = score(q_net[:k], val[:k])

@@ -172,3 +172,25 @@ def test_bad_alpha_convention_lists_valid_values(value):
 def test_bad_configurations_raise(robot, q, method):
     with pytest.raises(ValueError, match=r"\bq\b"):
         getattr(robot, method)(q)
+
+
+@pytest.mark.parametrize("convention", ["eq2", "eq1"])
+def test_configuration_of_inverts_target_pose(convention):
+    """Round trip over the joint ranges (roll all the way round), for both conventions and another alpha."""
+    rng = np.random.default_rng(7)
+    q = np.stack([rng.uniform(0.0, 0.1, 500), rng.uniform(-np.pi / 3, np.pi / 3, 500),
+                  rng.uniform(-np.pi / 3, np.pi / 3, 500), rng.uniform(-np.pi + 1e-9, np.pi, 500)], axis=1)
+    for alpha in (np.pi / 6, -0.4):
+        robot = DaVinciEndoscope(alpha=alpha, alpha_convention=convention)
+        p, R = robot.target_pose(q)
+        np.testing.assert_allclose(robot.configuration_of(p, R), q, atol=1e-12, rtol=0)
+        np.testing.assert_allclose(robot.configuration_of(p[3], R[3]), q[3], atol=1e-12, rtol=0)
+
+
+def test_configuration_of_rejects_bad_shapes():
+    robot = DaVinciEndoscope()
+    p, R = robot.target_pose(robot.home)
+    with pytest.raises(ValueError, match="p_target must be"):
+        robot.configuration_of(p[:2], R)
+    with pytest.raises(ValueError, match="finite"):
+        robot.configuration_of(p * np.nan, R)

@@ -1,0 +1,138 @@
+"""ViewTracking's ``distilled_optimum`` base: a network distilled from the offline optimum, and a controller
+that steers the joints to its configuration.
+
+Why: the learned residuals on the dimension-reduced IK settle on many targets in another configuration than the
+best one (docs/optimum-experiments.md, Campaigns 6-11); the best configuration is a function of the target once
+its labels are made smooth by continuation (Campaign 11). This base gives the residual that configuration.
+
+The network (``distilled_view.npz``: two tanh layers of 128) maps the da Vinci configuration the target comes
+from (``davinci_configuration``, the exact inverse of ``davinci_pose``), scaled as
+((L_dV - 0.065 m) / 0.015 m, yaw / (pi/3), pitch / (pi/3), roll / (pi/4)), to the configuration encoded as
+(L0 / 0.1 m, theta1, theta2, cos phi, sin phi, theta1 (cos, sin) delta1, theta2 (cos, sin) delta2). It was
+fitted (20,000 minibatch Adam steps) to 89,600 continuation labels over insertion 0.050-0.080 m x yaw, pitch in
+[-pi/3, pi/3] x roll in [-pi/4, pi/4), all training-split targets: ``scripts/optimum/vt_smooth_labels_4d.py``
+made the labels, ``scripts/optimum/vt_label_fit_4d.py --width 128 --steps 20000 --save`` the weights.
+
+The controller: rate = ``GAIN`` x (network configuration - q), the bend directions by their shortest angle,
+each joint's rate capped at ``CAP`` action units (``ACTION_SCALE``). It is registered through the public
+registry (``register_controller``), as a researcher's controller is; a config names it
+``"continuum_gym.agents.distilled_view:distilled_optimum"`` so that any process rebuilds it by importing this
+module. It knows the paper's robot and da Vinci endoscope only (the network was fitted for them).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from continuum_gym.robots.compiled import kernel
+from continuum_gym.robots.davinci import davinci_configuration
+
+if TYPE_CHECKING:
+    from continuum_gym.envs.registered import CustomController
+
+NAME = "distilled_optimum"
+#: How a config refers to this controller from any process (``continuum_gym.plugins.lookup``).
+REFERENCE = f"{__name__}:{NAME}"
+WEIGHTS = Path(__file__).with_name("distilled_view.npz")
+#: Proportional gain (1/s): 0.4 of the error per 0.01 s control step.
+GAIN = 40.0
+#: Rate cap per joint, in action units (``ACTION_SCALE``: 0.1 m/s for L0, pi/2 or pi rad/s for the angles).
+CAP = 10.0
+#: params[:HEADER] = gain, signed alpha, Le, width, joint lower (6), joint upper (6), rate caps (6).
+HEADER = 22
+#: Stand-in for an unlimited joint's bound (the bend directions).
+UNLIMITED = 1e9
+
+
+def pack(weights: dict, gain: float = GAIN, cap: float = CAP) -> np.ndarray:
+    """The controller's ``params``: the header (see ``HEADER``), then W0, b0, W1, b1, W2, b2 row-major."""
+    from continuum_gym.envs.view_tracking.core import ACTION_SCALE
+    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
+
+    lower, upper = (np.asarray(b, dtype=float) for b in ContinuumEndoscope().joint_limits)
+    lower = np.where(np.isfinite(lower), lower, -UNLIMITED)
+    upper = np.where(np.isfinite(upper), upper, UNLIMITED)
+    dv = DaVinciEndoscope()
+    width = weights["b0"].shape[0]
+    head = np.concatenate([[gain, dv.kernel_args().alpha, dv.Le, width], lower, upper, cap * ACTION_SCALE])
+    return np.concatenate([head] + [np.asarray(weights[k], dtype=float).reshape(-1)
+                                    for k in ("W0", "b0", "W1", "b1", "W2", "b2")])
+
+
+@kernel
+def network_configuration(p_target, R_target, params, out):
+    """The network's configuration (6,) for the target (p_target, R_target), clipped to the joint limits."""
+    width = int(params[3])
+    c = np.empty(4)
+    davinci_configuration(p_target, R_target, params[1], params[2], c)
+    x = np.array([(c[0] - 0.065) / 0.015, c[1] / (math.pi / 3), c[2] / (math.pi / 3), c[3] / (math.pi / 4)])
+    at = HEADER
+    W0 = params[at:at + 4 * width].reshape(width, 4)
+    at += 4 * width
+    h1 = np.tanh(W0 @ x + params[at:at + width])
+    at += width
+    W1 = params[at:at + width * width].reshape(width, width)
+    at += width * width
+    h2 = np.tanh(W1 @ h1 + params[at:at + width])
+    at += width
+    W2 = params[at:at + 9 * width].reshape(9, width)
+    at += 9 * width
+    y = W2 @ h2 + params[at:at + 9]
+    out[0] = 0.1 * y[0]
+    out[1] = math.atan2(y[4], y[3])
+    out[2] = y[1]
+    out[3] = math.atan2(y[6], y[5])
+    out[4] = y[2]
+    out[5] = math.atan2(y[8], y[7])
+    for k in range(6):
+        out[k] = min(max(out[k], params[4 + k]), params[10 + k])
+
+
+@kernel
+def distilled_rates(q, p_target, R_target, dt, robot, params, out):
+    """Joint rates (6,) towards the network's configuration: gain x error, capped per joint."""
+    goal = np.empty(6)
+    network_configuration(p_target, R_target, params, goal)
+    gain = params[0]
+    for k in range(6):
+        error = goal[k] - q[k]
+        if k == 3 or k == 5:  # bend directions: unlimited angles, the shortest way
+            error = (error + math.pi) % (2.0 * math.pi) - math.pi
+        cap = params[16 + k]
+        out[k] = min(max(gain * error, -cap), cap)
+
+
+def register(weights: Path | None = None, gain: float = GAIN, cap: float = CAP,
+             name: str = NAME) -> CustomController:
+    """Register the controller (``replace=True``: importing twice is harmless); returns the registration."""
+    from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
+    from continuum_gym.registry import register_controller
+
+    path = Path(weights) if weights is not None else WEIGHTS
+    with np.load(path) as data:
+        params = pack(dict(data), gain, cap)
+    return register_controller(name, distilled_rates, env=ViewTrackingConfig.env_id, params=params.tolist(),
+                               replace=True, doc=f"steers to the configuration distilled from the offline optimum "
+                               f"({path.name}; gain {gain:g} 1/s, cap {cap:g} action units)")
+
+
+def configurations(p_target: np.ndarray, R_target: np.ndarray, weights: Path | None = None) -> np.ndarray:
+    """The network's configurations (n, 6) for targets (n, 3), (n, 3, 3) (for analysis and tests)."""
+    path = Path(weights) if weights is not None else WEIGHTS
+    with np.load(path) as data:
+        params = pack(dict(data))
+    out = np.empty((len(p_target), 6))
+    for i in range(len(p_target)):
+        network_configuration(np.ascontiguousarray(p_target[i], dtype=float),
+                              np.ascontiguousarray(R_target[i], dtype=float), params, out[i])
+    return out
+
+
+register()
+
+__all__ = ["NAME", "REFERENCE", "WEIGHTS", "GAIN", "CAP", "pack", "network_configuration", "distilled_rates",
+           "register", "configurations"]
