@@ -157,9 +157,12 @@ def baseline_methods(spec: EnvSpec, own: list | tuple = ()) -> list:
     return rows
 
 
-def own_bases(spec: EnvSpec, env_id: str, methods: list) -> list:
-    """The registered controllers in play: the id's own base and those the learned methods were trained on."""
-    candidates = [registered_base(env_id)]
+def own_bases(spec: EnvSpec, env_id: str, methods: list, environment: dict | None = None) -> list:
+    """The registered controllers in play: the env's packaged bases (fitted to the paper's robots: only when
+    ``environment`` changes none of ``spec.physics``), the id's own base and those the learned methods were
+    trained on."""
+    nominal = not any(key in (environment or {}) for key in spec.physics)
+    candidates = [*(spec.packaged_bases if nominal else ()), registered_base(env_id)]
     candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
     return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
 
@@ -281,7 +284,7 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
                                run.algo or _sb3_algo(run.policy)) for run in runs]) for name, runs in extra]
     skipped: dict = {}
     learned = discovered_methods(spec, policies or {}, skipped, env_id) + extra
-    methods = baseline_methods(spec, own_bases(spec, env_id, learned)) + learned
+    methods = baseline_methods(spec, own_bases(spec, env_id, learned, environment)) + learned
     results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
     table = aggregate(env_id, results, optimum, grid, trained_bases(methods))

@@ -6,6 +6,7 @@ region, drawn at random), ids 0 to ``--count`` - 1, and reports the same share, 
 next to the 21 x 21 grid's figure computed here in the same way. Test split: run once per shipped candidate.
 
     PYTHONPATH=. python scripts/optimum/offgrid_view.py continuum_gym/agents/policies/ViewTracking-v0/*dimension*
+    PYTHONPATH=. python scripts/optimum/offgrid_view.py --base continuum_gym.agents.distilled_view:distilled_optimum
 """
 
 from __future__ import annotations
@@ -32,17 +33,24 @@ def coverage(policy, env_kwargs: dict, task: str, count: int) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("runs", nargs="+", type=Path, help="policy directories (model.zip + config.yml)")
+    parser.add_argument("runs", nargs="*", type=Path, help="policy directories (model.zip + config.yml)")
+    parser.add_argument("--base", action="append", default=[],
+                        help="a base controller (name or module:name) with a zero residual (repeatable)")
     parser.add_argument("--count", type=int, default=1000, help="off-grid targets (test pan_tilt ids 0..count-1)")
     args = parser.parse_args(argv)
     from continuum_gym.envs.spec import get_spec
     from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
+    from continuum_gym.evaluation.rollout import ZeroResidual
 
     rows = []
-    for run in args.runs:
-        model, config = load_policy(run)
-        kwargs = policy_env_kwargs(get_spec(ENV), config)
-        row = {"run": str(run), "grid_21x21": coverage(model, kwargs, "coverage", 441),
+    jobs = [(base, None) for base in args.base] + [(None, run) for run in args.runs]
+    for base, run in jobs:
+        if run is None:
+            model, kwargs = ZeroResidual(6), {"base_controller": base}
+        else:
+            model, config = load_policy(run)
+            kwargs = policy_env_kwargs(get_spec(ENV), config)
+        row = {"run": str(run or base), "grid_21x21": coverage(model, kwargs, "coverage", 441),
                f"off_grid_{args.count}": coverage(model, kwargs, "pan_tilt", args.count)}
         rows.append(row)
         print(json.dumps(row), flush=True)

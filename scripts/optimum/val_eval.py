@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
     parser.add_argument("--base-controller", default=None,
                         help="with --base: this (e.g. registered) controller instead of the env's headline baseline")
-    parser.add_argument("--polish", type=float, default=None, help="with --base: the env's overlap_polish")
+    parser.add_argument("--polish", type=float, default=None, help="the env's overlap_polish (for --base and the runs)")
     parser.add_argument("--import", dest="imports", action="append", default=[],
                         help="plug-in module to import first (registered controllers, tasks)")
     args = parser.parse_args(argv)
@@ -186,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
             model, config, run, step = load(target.expanduser().resolve())
             env_id = config["env_id"]
             kwargs = policy_env_kwargs(get_spec(env_id), config)
+            if args.polish is not None:
+                kwargs["overlap_polish"] = args.polish
             name = run.name
         if args.selection and env_id != VIEW:
             raise SystemExit(f"--selection is defined for {VIEW} only")

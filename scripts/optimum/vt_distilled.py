@@ -22,14 +22,16 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 NAME = "distilled_optimum"
 
 
-def register(gain: float | None = None, cap: float | None = None) -> None:
-    """The package's controller (``continuum_gym.agents.distilled_view``) with ``VT_DISTILLED_NET``'s weights."""
+def register(gain: float | None = None, cap: float | None = None, ascent: float | None = None) -> None:
+    """The package's controller (``continuum_gym.agents.distilled_view``) with ``VT_DISTILLED_NET``'s weights;
+    without its OR lookahead unless ``VT_DISTILLED_ASCENT`` says (Campaign 12's runs (a), (a2) trained on that)."""
     from continuum_gym.agents.distilled_view import CAP, GAIN, WEIGHTS
     from continuum_gym.agents.distilled_view import register as register_distilled
 
     gain = float(os.environ.get("VT_DISTILLED_GAIN", GAIN)) if gain is None else gain
     cap = float(os.environ.get("VT_DISTILLED_CAP", CAP)) if cap is None else cap
-    register_distilled(Path(os.environ.get("VT_DISTILLED_NET", WEIGHTS)), gain, cap, NAME)
+    ascent = float(os.environ.get("VT_DISTILLED_ASCENT", 0.0)) if ascent is None else ascent
+    register_distilled(Path(os.environ.get("VT_DISTILLED_NET", WEIGHTS)), gain, cap, ascent, NAME)
 
 
 register()
