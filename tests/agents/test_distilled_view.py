@@ -134,3 +134,23 @@ def test_distilled_base_covers_more_than_the_dimension_reduced_ik(base_runs):
     assert plain > np.mean(final["dimension_reduced"] > 0.8)
     assert np.mean(final[distilled_view.REFERENCE] > 0.8) >= plain
     assert np.mean(final[distilled_view.REFERENCE]) > np.mean(final["distilled_without_lookahead"])
+
+
+def test_a_fresh_process_finds_the_base_by_its_bare_name():
+    """The package's entry point (group continuum_gym.plugins) registers it on first use, as a plug-in's."""
+    import subprocess
+    import sys
+
+    code = ("import gymnasium as gym, numpy as np, continuum_gym\n"
+            "env = gym.make('ContinuumGym/ViewTracking-v0', base_controller='distilled_optimum')\n"
+            "env.reset(seed=0)\n"
+            "print(repr(env.step(np.zeros(6))[4]['base_command'].tolist()))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    import gymnasium as gym
+
+    env = gym.make(VIEW, base_controller=distilled_view.REFERENCE)
+    env.reset(seed=0)
+    here = env.step(np.zeros(6))[4]["base_command"]
+    assert np.any(here != 0.0)
+    assert out.stdout.strip().splitlines()[-1] == repr(here.tolist())
