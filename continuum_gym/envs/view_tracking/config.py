@@ -51,7 +51,8 @@ class ViewTrackingConfig(EnvConfig):
     task_split: str = field(default="train", metadata=spec(
         doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
     base_controller: str | None = field(default="dimension_reduced", metadata=spec(
-        doc="residual base: `dimension_reduced`, `resolved_rate`, or `None` (pure RL)", type_name="str or None"))
+        doc="residual base: `dimension_reduced`, `resolved_rate`, a registered controller (the package ships "
+            "`distilled_optimum`), or `None` (pure RL)", type_name="str or None"))
     residual_scale: float = field(default=0.3, metadata=spec(
         unit="fraction of the action scale", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
     residual_space: str = field(default="joint", metadata=spec(
