@@ -122,7 +122,8 @@ def _stat(spec, name: str, s) -> str:
 def ordered_rows(spec, table: dict) -> list:
     base = spec.headline_baseline
     learned = [pattern.format(base=base) for pattern in LEARNED_ORDER]
-    rows = [m for m in table if m in spec.baselines]
+    packaged = [reference.rpartition(":")[2] for reference in spec.packaged_bases]
+    rows = [m for m in table if m in spec.baselines or m in packaged]
     rows += [m for m in learned if m in table]
     rows += [m for m in table if m not in rows and m not in ("offline_optimum", "bounded_least_squares")]
     rows += [m for m in ("offline_optimum", "bounded_least_squares") if m in table]
@@ -200,7 +201,9 @@ def page(data: dict) -> str:
 
 Every learned run of the reference campaign (issue 35), evaluated once on the **test split**:
 residual PPO, SAC and TD3 on each env's headline baseline (5 seeds each) and pure-RL PPO and SAC
-(3 seeds each), beside the analytic baselines and the offline optimum. Hyperparameters were chosen on
+(3 seeds each), beside the analytic baselines, the packaged bases (ViewTracking's `distilled_optimum`, a controller
+distilled from the offline optimum: [optimum experiments](optimum-experiments.md#campaign-12-2026-12-07)) and the
+offline optimum. Hyperparameters were chosen on
 the validation split only (`continuum_gym/agents/hyperparams/*.yml`, each choice commented with its
 measurement); budgets and protocol: [benchmark protocol](protocol.md). Regenerate this page (tables,
 figures, sizes) with one command:
