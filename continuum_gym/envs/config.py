@@ -85,6 +85,9 @@ class EnvConfig:
     #: Gymnasium id the configuration belongs to (set by subclasses).
     env_id: ClassVar[str] = ""
     baselines: ClassVar[tuple] = ()
+    #: "module:name"s of registered controllers the package ships as bases, also valid by their bare names (the
+    #: module registers the controller when first named; ``EnvSpec.packaged_bases`` reads this)
+    packaged_controllers: ClassVar[tuple] = ()
     #: Keyword arguments accepted for backward compatibility that must stay at None here.
     foreign_keywords: ClassVar[tuple] = ()
     #: Keywords whose objects (robot, endoscope, model error) may also be given as ``to_dict()`` writes them.
@@ -312,11 +315,17 @@ def _resolve_controller(config: EnvConfig) -> str | None:
         return value
     if not isinstance(value, str):
         choice(value, builtin, "base_controller")
+    # a controller the package ships goes by its bare name: its module registers it on first use (an entry point
+    # would import it, and its compiled kernels, in every process that loads plug-ins, even for `--help`)
+    packaged = {reference.rpartition(":")[2]: reference for reference in config.packaged_controllers}
+    if value in packaged and value not in registered.CONTROLLERS[config.env_id]:
+        value = packaged[value]
     try:
         return registered.resolve("controller", config.env_id, value)
     except ValueError as error:
-        raise ValueError(f"base_controller must be one of {list(builtin)}, a registered controller or None"
-                         f"{closest(value, builtin) if ':' not in value else ''}; got {value!r}. If it is your own "
+        known = [*builtin, *packaged]
+        raise ValueError(f"base_controller must be one of {known}, a registered controller or None"
+                         f"{closest(value, known) if ':' not in value else ''}; got {value!r}. If it is your own "
                          f"controller: {error}") from None
 
 

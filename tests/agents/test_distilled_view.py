@@ -4,16 +4,37 @@ dimension-reduced IK reaches on the same validation targets."""
 
 from __future__ import annotations
 
+import importlib
 import math
+import os
 
 import numpy as np
 import pytest
 
-from continuum_gym.agents import distilled_view
 from continuum_gym.envs.view_tracking.core import ACTION_SCALE
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
 VIEW = "ContinuumGym/ViewTracking-v0"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registrations_stay_in_this_module():
+    """Importing the module registers its controller, which records the module in CONTINUUM_GYM_PLUGINS for child
+    processes: imported here, not at collection, and the variable restored after the module's tests, so that other
+    tests' subprocesses (``--help`` must import nothing heavy) do not inherit it."""
+    from continuum_gym.plugins import ENV_VAR
+
+    before = os.environ.get(ENV_VAR)
+    global distilled_view
+    distilled_view = importlib.import_module("continuum_gym.agents.distilled_view")
+    yield
+    if before is None:
+        os.environ.pop(ENV_VAR, None)
+    else:
+        os.environ[ENV_VAR] = before
+
+
+distilled_view = None  # set by registrations_stay_in_this_module
 
 
 def numpy_network(p, R):
@@ -137,7 +158,7 @@ def test_distilled_base_covers_more_than_the_dimension_reduced_ik(base_runs):
 
 
 def test_a_fresh_process_finds_the_base_by_its_bare_name():
-    """The package's entry point (group continuum_gym.plugins) registers it on first use, as a plug-in's."""
+    """``ViewTrackingConfig.packaged_controllers``: the bare name imports the module that registers it."""
     import subprocess
     import sys
 
