@@ -52,6 +52,9 @@ WEIGHTS = Path(__file__).with_name("distilled_view.npz")
 GAIN = 40.0
 #: Rate cap per joint, in action units (``ACTION_SCALE``: 0.1 m/s for L0, pi/2 or pi rad/s for the angles).
 CAP = 10.0
+#: The network's inputs: (da Vinci configuration - INPUT_OFFSET) / INPUT_SCALE, about [-1, 1] over the labels.
+INPUT_OFFSET = (0.065, 0.0, 0.0, 0.0)
+INPUT_SCALE = (0.015, math.pi / 3, math.pi / 3, math.pi / 4)
 #: Largest step of the OR lookahead, in action units (0: no lookahead).
 ASCENT = 0.15
 #: The lookahead acts only while the OR is at least this (far from the target it would climb the wrong hill).
@@ -66,6 +69,27 @@ ASCENT_H = 1e-4
 HEADER = 32
 #: Stand-in for an unlimited joint's bound (the bend directions).
 UNLIMITED = 1e9
+
+
+def network_inputs(q_davinci: np.ndarray) -> np.ndarray:
+    """(n, 4) da Vinci configurations [L_dV (m), yaw, pitch, roll] -> (n, 4) network inputs."""
+    return (np.asarray(q_davinci, dtype=float) - np.array(INPUT_OFFSET)) / np.array(INPUT_SCALE)
+
+
+def encode(q: np.ndarray) -> np.ndarray:
+    """(n, 6) configurations -> (n, 9) network outputs: L0 / 0.1 m, theta1, theta2, (cos, sin) phi, each
+    segment's bend vector theta (cos, sin) delta (a straight segment's direction does not matter)."""
+    return np.stack([q[:, 0] / 0.1, q[:, 2], q[:, 4], np.cos(q[:, 1]), np.sin(q[:, 1]),
+                     q[:, 2] * np.cos(q[:, 3]), q[:, 2] * np.sin(q[:, 3]),
+                     q[:, 4] * np.cos(q[:, 5]), q[:, 4] * np.sin(q[:, 5])], axis=1)
+
+
+def decode(y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """(n, 9) network outputs -> (n, 6) configurations within the joint limits (inf: unlimited); the inverse of
+    ``encode`` (what ``network_configuration`` computes in the kernel)."""
+    q = np.stack([0.1 * y[:, 0], np.arctan2(y[:, 4], y[:, 3]), y[:, 1], np.arctan2(y[:, 6], y[:, 5]),
+                  y[:, 2], np.arctan2(y[:, 8], y[:, 7])], axis=1)
+    return np.clip(q, np.where(np.isfinite(lower), lower, -np.inf), np.where(np.isfinite(upper), upper, np.inf))
 
 
 def pack(weights: dict, gain: float = GAIN, cap: float = CAP, ascent: float = ASCENT) -> np.ndarray:
@@ -92,7 +116,9 @@ def network_configuration(p_target, R_target, params, out):
     width = int(params[3])
     c = np.empty(4)
     davinci_configuration(p_target, R_target, params[1], params[2], c)
-    x = np.array([(c[0] - 0.065) / 0.015, c[1] / (math.pi / 3), c[2] / (math.pi / 3), c[3] / (math.pi / 4)])
+    x = np.empty(4)
+    for k in range(4):
+        x[k] = (c[k] - INPUT_OFFSET[k]) / INPUT_SCALE[k]
     at = HEADER
     W0 = params[at:at + 4 * width].reshape(width, 4)
     at += 4 * width
@@ -212,5 +238,6 @@ def configurations(p_target: np.ndarray, R_target: np.ndarray, weights: Path | N
 
 register()
 
-__all__ = ["NAME", "REFERENCE", "WEIGHTS", "GAIN", "CAP", "ASCENT", "ASCENT_MIN_OR", "ASCENT_FRACTIONS", "pack",
+__all__ = ["NAME", "REFERENCE", "WEIGHTS", "GAIN", "CAP", "ASCENT", "ASCENT_MIN_OR", "ASCENT_FRACTIONS",
+           "INPUT_OFFSET", "INPUT_SCALE", "network_inputs", "encode", "decode", "pack",
            "network_configuration", "lookahead_overlap", "distilled_rates", "register", "configurations"]

@@ -158,7 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
     parser.add_argument("--base-controller", default=None,
                         help="with --base: this (e.g. registered) controller instead of the env's headline baseline")
-    parser.add_argument("--polish", type=float, default=None, help="the env's overlap_polish (for --base and the runs)")
+    parser.add_argument("--polish", type=float, default=None,
+                        help="the env's overlap_polish (for --base and the runs); with --base the residual scale is "
+                        "set to the shipped residuals' 3, which the polish's step is a fraction of")
     parser.add_argument("--import", dest="imports", action="append", default=[],
                         help="plug-in module to import first (registered controllers, tasks)")
     args = parser.parse_args(argv)

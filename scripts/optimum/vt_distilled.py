@@ -38,7 +38,7 @@ register()
 
 
 def main(argv: list[str] | None = None) -> int:
-    from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
+    from val_eval import rollout
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=1024, help="validation ids 0..count-1 of pan_tilt and static")
@@ -48,17 +48,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tasks", nargs="+", default=["pan_tilt", "static", "random"])
     args = parser.parse_args(argv)
     register(gain=args.gain, cap=args.cap)
-    summary = {}
+    kwargs = {"base_controller": NAME, "residual_scale": 3.0, "overlap_polish": args.polish}
     for task in args.tasks:
-        count = args.count if task != "random" else min(args.count, 256)
-        core = make_core(VIEW, count, task=task, task_split="validation", base_controller=NAME, residual_scale=3.0,
-                         overlap_polish=args.polish)
-        out = run_episodes(core, ZeroResidual(core.single_action_space.shape[0]), np.arange(count))
-        final = out.get("final_or")
-        summary[task] = {"mean_or": float(np.mean(out["mean_or"] if "mean_or" in out else out["overlap"]))}
-        if final is not None:
-            summary[task]["coverage"] = float(100 * np.mean(final > 0.8))
-        print(task, json.dumps(summary[task]), flush=True)
+        out = rollout(VIEW, None, kwargs, task, args.count if task != "random" else min(args.count, 256))
+        summary = {"mean_or": float(np.mean(out["mean_or"])), "coverage": float(100 * np.mean(out["final_or"] > 0.8))}
+        print(task, json.dumps(summary), flush=True)
     return 0
 
 

@@ -21,20 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from continuum_gym.agents.distilled_view import decode, encode  # the encoding the shipped network uses
+
 VIEW = "ContinuumGym/ViewTracking-v0"
-
-
-def encode(q: np.ndarray) -> np.ndarray:
-    """(n, 6) configurations -> (n, 9) smooth features."""
-    return np.stack([q[:, 0] / 0.1, q[:, 2], q[:, 4], np.cos(q[:, 1]), np.sin(q[:, 1]),
-                     q[:, 2] * np.cos(q[:, 3]), q[:, 2] * np.sin(q[:, 3]),
-                     q[:, 4] * np.cos(q[:, 5]), q[:, 4] * np.sin(q[:, 5])], axis=1)
-
-
-def decode(y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    q = np.stack([0.1 * y[:, 0], np.arctan2(y[:, 4], y[:, 3]), y[:, 1], np.arctan2(y[:, 6], y[:, 5]),
-                  y[:, 2], np.arctan2(y[:, 8], y[:, 7])], axis=1)
-    return np.clip(q, np.where(np.isfinite(lower), lower, -np.inf), np.where(np.isfinite(upper), upper, np.inf))
 
 
 def fit_mlp(x: np.ndarray, y: np.ndarray, steps: int, seed: int, batch: int | None = None, width: int = 256):

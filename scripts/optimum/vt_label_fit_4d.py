@@ -12,18 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
 import numpy as np
-from vt_label_fit import decode, encode, fit_mlp, local_ascent, score
+from vt_label_fit import fit_mlp, local_ascent, score
+
+from continuum_gym.agents.distilled_view import decode, encode
+from continuum_gym.agents.distilled_view import network_inputs as inputs
 
 VIEW = "ContinuumGym/ViewTracking-v0"
-
-
-def inputs(targets: np.ndarray) -> np.ndarray:
-    return np.stack([(targets[:, 0] - 0.065) / 0.015, targets[:, 1] / (math.pi / 3), targets[:, 2] / (math.pi / 3),
-                     targets[:, 3] / (math.pi / 4)], axis=1)
 
 
 def main(argv: list[str] | None = None) -> int:
