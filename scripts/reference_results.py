@@ -122,7 +122,7 @@ def _stat(spec, name: str, s) -> str:
 def ordered_rows(spec, table: dict) -> list:
     base = spec.headline_baseline
     learned = [pattern.format(base=base) for pattern in LEARNED_ORDER]
-    packaged = [reference.rpartition(":")[2] for reference in spec.packaged_bases]
+    packaged = [reference.rpartition(":")[2] for reference in spec.config_class.packaged_controllers]
     rows = [m for m in table if m in spec.baselines or m in packaged]
     rows += [m for m in learned if m in table]
     rows += [m for m in table if m not in rows and m not in ("offline_optimum", "bounded_least_squares")]

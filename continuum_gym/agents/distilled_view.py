@@ -23,7 +23,7 @@ step) that maximises the OR after one control step, where it beats no step. This
 the best configuration near the network's; ``ascent=0`` turns it off. It is registered through the public
 registry (``register_controller``), as a researcher's controller is; a config names it
 ``"continuum_gym.agents.distilled_view:distilled_optimum"`` so that any process rebuilds it by importing this
-module, and ``continuum-gym evaluate`` gives it a row beside the analytic baselines (``EnvSpec.packaged_bases``).
+module, and ``continuum-gym evaluate`` gives it a row beside the analytic baselines (``packaged_controllers`` of the config).
 It knows the paper's robot and da Vinci endoscope only (the network was fitted for them): with other physics the
 evaluation leaves its row out.
 """

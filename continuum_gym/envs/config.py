@@ -86,7 +86,8 @@ class EnvConfig:
     env_id: ClassVar[str] = ""
     baselines: ClassVar[tuple] = ()
     #: "module:name"s of registered controllers the package ships as bases, also valid by their bare names (the
-    #: module registers the controller when first named; ``EnvSpec.packaged_bases`` reads this)
+    #: module registers the controller when first named); ``continuum-gym evaluate`` gives each a row beside the
+    #: analytic baselines
     packaged_controllers: ClassVar[tuple] = ()
     #: Keyword arguments accepted for backward compatibility that must stay at None here.
     foreign_keywords: ClassVar[tuple] = ()

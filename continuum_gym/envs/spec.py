@@ -122,9 +122,6 @@ class EnvSpec:
     #: "module:function"s that call the env's library API (batched kinematics, baselines) once, so that
     #: ``continuum-gym precompile`` compiles what ``continuum-gym reproduce`` runs
     warm_ups: tuple[str, ...] = ()
-    #: "module:name"s of registered controllers the package ships as residual bases (the module registers the
-    #: controller at import): ``continuum-gym evaluate`` gives each a row beside the analytic baselines
-    packaged_bases: tuple[str, ...] = ()
 
     @property
     def short_name(self) -> str:

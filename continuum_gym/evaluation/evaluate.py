@@ -162,7 +162,7 @@ def own_bases(spec: EnvSpec, env_id: str, methods: list, environment: dict | Non
     ``environment`` changes none of ``spec.physics``), the id's own base and those the learned methods were
     trained on."""
     nominal = not any(key in (environment or {}) for key in spec.physics)
-    candidates = [*(spec.packaged_bases if nominal else ()), registered_base(env_id)]
+    candidates = [*(spec.config_class.packaged_controllers if nominal else ()), registered_base(env_id)]
     candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
     return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
 

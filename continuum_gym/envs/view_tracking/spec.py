@@ -54,7 +54,6 @@ SPEC = register_env(EnvSpec(
     physics=("robot", "davinci"),
     optimum="continuum_gym.evaluation.optimum.view:env_optimum",
     warm_ups=("continuum_gym.evaluation.reproduction:warm_up_view",),
-    packaged_bases=ViewTrackingConfig.packaged_controllers,
 ))
 ENV_ID = SPEC.env_id
 
