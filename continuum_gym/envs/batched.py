@@ -132,8 +132,8 @@ class BatchedCore(abc.ABC):
 
     #: Class attributes a concrete core must set, each documented at its declaration below.
     REQUIRED_CLASS_ATTRIBUTES: ClassVar[tuple[str, ...]] = (
-        "spec", "config_class", "step_kernel", "terminated_flag", "truncated_flag", "builtin_reward_names",
-        "info_fields", "metric_columns")
+        "spec", "config_class", "step_kernel", "terminated_flag", "truncated_flag", "non_finite_flag",
+        "builtin_reward_names", "info_fields", "metric_columns")
 
     spec: ClassVar[Any] = None  #: the env's ``EnvSpec`` (id, baselines, metrics, scene, kernels)
     #: The ``EnvConfig`` subclass the core is built from (None here: each concrete core sets it).
@@ -145,6 +145,8 @@ class BatchedCore(abc.ABC):
     claim_block = 1  #: rows a thread claims at a time (``envs/row_claims``): larger where rows are cheap
     terminated_flag: int  #: the column of ``flags`` its step kernel sets when a row terminates
     truncated_flag: int  #: ... and when a row is truncated
+    #: ... and when a value of a row is not finite (``common_kernels.mark_non_finite``; see ``envs/faults.py``)
+    non_finite_flag: int
     num_threads: int  #: threads a large batch may be stepped on (``step_threads(num_threads)``), set by the constructor
     row_threads: int  #: threads a step runs on (``row_threads``), set by the constructor
     builtin_reward_names: tuple = ()  #: the env's own reward terms, in the order of its weights
@@ -165,6 +167,8 @@ class BatchedCore(abc.ABC):
     flags: np.ndarray  # (N, n_flags) int64
     terms: np.ndarray  # (N, n_terms) float64 weighted reward terms
     rewards: np.ndarray  # (N,) float64
+    #: (1,) int64: rows the kernels flagged non-finite since the last check (the step's ``out.faults``)
+    _faults: np.ndarray
     limit: np.ndarray  # (N,) int64 episode step limits
     control_dt: float
     substeps: int
@@ -195,9 +199,12 @@ class BatchedCore(abc.ABC):
                             "(see continuum_gym.envs.batched.BatchedCore; pass abstract=True for a partial core)")
 
     def _config(self, config, kwargs):
-        """The validated config: ``config`` as given, or built from the keyword arguments."""
+        """The validated config: ``config`` as given (an ``EnvConfig``, or the dict its ``to_dict()`` wrote, as
+        Minari datasets store it), or built from the keyword arguments."""
         if config is None:
             return self.config_class.from_kwargs(**kwargs)
+        if isinstance(config, dict):
+            config = self.config_class.from_dict(config)
         if not isinstance(config, self.config_class):
             raise ValueError(f"config must be a {self.config_class.__name__}; got {type(config).__name__}")
         return config.replace(**kwargs) if kwargs else config
@@ -243,6 +250,10 @@ class BatchedCore(abc.ABC):
                         self.claim_block)
         if before is not None:
             self._add_registered_terms(actions, active, self._applied_rates(before))
+        if self._faults[0]:  # a row's value is not finite: raise, or end it as truncated (envs/faults.py)
+            from continuum_gym.envs.faults import handle
+
+            handle(self, active == 1, "step")
         # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
         return (self.rewards, self.flags[:, self.terminated_flag].astype(bool),
                 self.flags[:, self.truncated_flag].astype(bool))
@@ -339,8 +350,16 @@ class BatchedCore(abc.ABC):
         mask[rows] = OBSERVE_ONLY
         try:
             self._step_call(self.kernel_args(self._no_actions, mask), self._no_actions, mask, self.num_envs, 1)
+            if self._faults[0]:  # the row's first observation is not finite (envs/faults.py)
+                from continuum_gym.envs.faults import handle
+
+                handle(self, mask == OBSERVE_ONLY, "reset")
         finally:
             mask[rows] = 0
+
+    def non_finite(self) -> np.ndarray:
+        """(N,) bool: rows whose last step (or reset) had a value that is not finite (``info["non_finite"]``)."""
+        return self.flags[:, self.non_finite_flag] != 0
 
     @abc.abstractmethod
     def kernel_model(self) -> tuple:
@@ -367,7 +386,7 @@ class BatchedCore(abc.ABC):
             from continuum_gym.envs.custom import apply_reward_terms
 
             apply_reward_terms(self._reward_slot, self.metrics, self.flags, np.ascontiguousarray(actions, np.float64),
-                               rates, active, self.terms, self.rewards, first)
+                               rates, active, self.terms, self.rewards, first, self.non_finite_flag, self._faults)
         if not self._numpy_terms:
             return
         metrics = {name: self.metrics[:, column] for name, column in self.metric_columns.items()}
@@ -376,12 +395,16 @@ class BatchedCore(abc.ABC):
         for k, term in enumerate(self._numpy_terms):
             values = term.fn(metrics, actions, rates) if term.with_rates else term.fn(metrics, actions)
             values = np.asarray(values, dtype=np.float64).reshape(-1)
-            if values.shape != (self.num_envs,) or not np.all(np.isfinite(values[stepped])):
-                raise ValueError(f"reward term {term.name!r} must return {self.num_envs} finite values; got "
-                                 f"{values.shape} {values[:4]}")
+            if values.shape != (self.num_envs,):
+                raise ValueError(f"reward term {term.name!r} must return {self.num_envs} values (one per row); got "
+                                 f"shape {values.shape}")
             weighted = self.weights[term.name] * values
             self.terms[stepped, first + k] = weighted[stepped]
             self.rewards[stepped] += weighted[stepped]
+            bad = stepped & ~np.isfinite(weighted)
+            if bad.any():  # flagged like a compiled term's (envs/faults.py)
+                self._faults[0] += int(np.count_nonzero(bad & ~self.non_finite()))
+                self.flags[bad, self.non_finite_flag] = 1
 
     def desired(self, row: int, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Row's desired position (occlusion, m) or da Vinci configuration (view) and its rate at time t (s)."""

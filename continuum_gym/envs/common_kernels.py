@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from continuum_gym.envs.row_claims import atomic_add
 from continuum_gym.envs.trajectories import hermite_point
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.rotations import rotation_exp
@@ -111,3 +112,38 @@ def clamp(value, lower, upper):
     if value < lower:
         return lower, True
     return value, False
+
+
+@kernel(inline="always")
+def finite_values(values):
+    """Whether every entry of the 1-D array ``values`` is finite (no NaN, no inf)."""
+    for k in range(values.shape[0]):
+        if not math.isfinite(values[k]):
+            return False
+    return True
+
+
+@kernel(inline="always")
+def mark_non_finite(i, q, out, column):
+    """Row i's non-finite flag (``flags[i, column]``): 1 where its joints q, its cached baseline command, its
+    observation or its metrics hold a NaN or an inf, else 0; each flagged row is counted in ``out.faults[0]``.
+
+    A plug-in's NaN (a controller's command, a robot's kinematics) reaches the state, and from there every value
+    of the row; without this flag it would be scored (a NaN configuration has a VOI of 0, the best value). The
+    observation is checked before it is read by anyone, and the count lets the front end find such rows with one
+    read per step (``envs/faults.py`` raises or ends the episode).
+    """
+    bad = not (finite_values(q) and finite_values(out.base_cmd[i]) and finite_values(out.obs[i])
+               and finite_values(out.metrics[i]))
+    out.flags[i, column] = 1 if bad else 0
+    if bad:
+        atomic_add(out.faults, 0, 1)
+
+
+@kernel(inline="always")
+def mark_non_finite_reward(i, out, column):
+    """Flag row i (as ``mark_non_finite``) if its reward is not finite."""
+    if not math.isfinite(out.rewards[i]):
+        if out.flags[i, column] == 0:
+            atomic_add(out.faults, 0, 1)
+        out.flags[i, column] = 1

@@ -19,6 +19,8 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
+import numpy as np
+
 from continuum_gym.validation import (
     choice,
     closest,
@@ -100,6 +102,13 @@ class EnvConfig:
     builtin_tasks: ClassVar[tuple] = ()  #: the built-in task families
     test_only_tasks: ClassVar[tuple] = ()  #: ... of which these are fixed evaluation tasks (test split only)
 
+    #: What a NaN or an inf in a row does (``envs/faults.py``): a field of every env, the library's own and yours.
+    on_non_finite: str = field(default="raise", kw_only=True, metadata=spec(
+        doc="what a value that is not finite (NaN or inf, e.g. from a plug-in) does: `raise` a `NonFiniteError` "
+            "naming the plug-in, the row and the step, or `truncate`: the episode ends as truncated with "
+            "`info['non_finite']` True and NaN metrics (never a score; `evaluate` refuses such episodes)",
+        type_name="str"))
+
     if TYPE_CHECKING:  # fields every subclass defines (declared for mypy only: here they would be fields)
         task: Any  # a task family's name, recorded trajectories or a TaskSource
         task_split: str
@@ -141,13 +150,25 @@ class EnvConfig:
         """The field values as keyword arguments (objects, not serialised)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
-    def to_dict(self) -> dict:
-        """Plain YAML/JSON values of every field (objects as their ``to_dict()`` with a ``type`` key)."""
+    def to_dict(self, recorded: str = "describe") -> dict:
+        """Plain YAML/JSON values of every field (objects as their ``to_dict()`` with a ``type`` key).
+
+        A recorded task is written as its description (``recorded="describe"``: name, counts and a digest, as
+        in a run's ``config.yml``) or with its samples inline (``"inline"``: nested lists, so that ``from_dict``
+        rebuilds it, as a Minari dataset stores it).
+        """
+        choice(recorded, ("describe", "inline"), "recorded")
         out = {}
         for f in fields(self):
             value = getattr(self, f.name)
             if hasattr(value, "to_dict"):
                 value = {"type": type(value).__name__, **value.to_dict()}
+            elif f.name == "task" and not isinstance(value, str) and recorded == "inline":
+                from continuum_gym.envs.trajectories import samples_of
+
+                value = {"type": "recorded", "data": [{name: (v.tolist() if isinstance(v, np.ndarray) else v)
+                                                       for name, v in samples_of(t).items()}
+                                                      for t in self.task_source.trajectories]}  # type: ignore[attr-defined]
             elif f.name == "task" and not isinstance(value, str):
                 value = {"type": "recorded", "description": self.task_source.describe()}
             elif f.name in ("task", "base_controller") and isinstance(value, str):
@@ -209,6 +230,10 @@ class EnvConfig:
         kinds = {"MultiBackboneRobot": MultiBackboneRobot, "LensCone": LensCone, "DaVinciEndoscope": DaVinciEndoscope,
                  "ModelError": ModelError}
         kind = value.pop("type")
+        if kind == "recorded" and key == "task" and "data" in value:  # samples written by to_dict("inline")
+            from continuum_gym.envs.trajectories import from_samples
+
+            return [from_samples(data) for data in value["data"]]
         if kind == "ContinuumEndoscope":
             lower, upper = value.pop("joint_limits", (None, None))
             limits = None if lower is None else ([-math.inf if v is None else v for v in lower],
@@ -238,7 +263,8 @@ class EnvConfig:
     def arguments_table(cls) -> str:
         """Markdown table of the keyword arguments: name, type, default, unit, meaning."""
         rows = ["| Argument | Type | Default | Unit | Meaning |", "|---|---|---|---|---|"]
-        for f in fields(cls):
+        shared = {f.name for f in fields(EnvConfig)}  # the env's own arguments first, then those every env has
+        for f in sorted(fields(cls), key=lambda f: f.name in shared):
             meta = f.metadata
             default = _default(f)
             shown = "paper's" if default is None and f.name in cls.object_keywords else repr(default)
@@ -250,9 +276,11 @@ class EnvConfig:
 def check_common(config: EnvConfig) -> None:
     """The keywords every env shares, checked against the config's own task families (``builtin_tasks``)."""
     from continuum_gym.envs import registered
+    from continuum_gym.envs.faults import ON_NON_FINITE
     from continuum_gym.envs.task_sources import resolve_task
 
     set_ = object.__setattr__
+    choice(config.on_non_finite, ON_NON_FINITE, "on_non_finite")
     tasks, test_only = config.builtin_tasks, config.test_only_tasks
     if isinstance(config.task, str) and config.task not in tasks and (
             ":" in config.task or config.task in registered.TASKS[config.env_id]):

@@ -9,6 +9,7 @@ False, no terms) costs one branch per step and leaves the built-in arithmetic un
 from __future__ import annotations
 
 import inspect
+import math
 from collections import namedtuple
 from collections.abc import Callable, Sequence
 from types import ModuleType
@@ -25,8 +26,9 @@ from continuum_gym.validation import describe
 if TYPE_CHECKING:
     from numba.core.typing.templates import Signature
 
-#: A controller slot: ``rates`` a typed list holding the function (or empty), its ``params`` and ``active``.
-ControllerSlot = namedtuple("ControllerSlot", ["rates", "params", "active"])
+#: A controller slot: ``rates`` a typed list holding the function (or empty), its ``params``, ``active`` and
+#: ``fault`` (1,) int64, set to 1 by the step when the controller writes a NaN or an inf (``record_fault``).
+ControllerSlot = namedtuple("ControllerSlot", ["rates", "params", "active", "fault"])
 #: Reward-term slot: typed lists of functions and of their parameter arrays, and their weights (k,).
 RewardSlot = namedtuple("RewardSlot", ["fns", "params", "weights"])
 
@@ -162,7 +164,7 @@ def controller_slot(env_id: str, controller: RegisteredController | None = None)
         return None
     rates = List.empty_list(types.FunctionType(controller_module(controller).rates_signature()))
     rates.append(controller.rates)
-    return ControllerSlot(rates, controller.params, True)
+    return ControllerSlot(rates, controller.params, True, np.zeros(1, dtype=np.int64))
 
 
 def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
@@ -177,10 +179,26 @@ def reward_slot(terms: Sequence, weights: Sequence[float]) -> RewardSlot | None:
     return RewardSlot(fns, params, np.array(list(weights), dtype=np.float64))
 
 
+@kernel(inline="always")
+def record_fault(slot, out):
+    """``slot.fault[0] = 1`` if the controller's command ``out`` holds a NaN or an inf.
+
+    The command is not changed: the state it drives becomes non-finite and is flagged where the row is
+    observed (``common_kernels.mark_non_finite``); this record says that the controller, not the robot or the
+    task, wrote the first non-finite value, so the error can name it.
+    """
+    for k in range(out.shape[0]):
+        if not math.isfinite(out[k]):
+            slot.fault[0] = 1
+            return
+
+
 @kernel
-def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewards, first):
+def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewards, first, non_finite, faults):
     """For each row that stepped (``active`` 1): terms[i, first + k] = w_k fn_k(metrics[i], flags[i], actions[i],
-    rates[i], params_k), added to rewards[i] after its built-in terms (the sum the step kernel wrote)."""
+    rates[i], params_k), added to rewards[i] after its built-in terms (the sum the step kernel wrote).
+
+    A term that returns a NaN or an inf flags its row (``flags[i, non_finite] = 1``, counted in ``faults[0]``)."""
     for i in range(active.shape[0]):
         if active[i] != 1:
             continue
@@ -190,6 +208,9 @@ def apply_reward_terms(slot, metrics, flags, actions, rates, active, terms, rewa
             terms[i, first + k] = value
             total += value
         rewards[i] += total
+        if not math.isfinite(total) and flags[i, non_finite] == 0:
+            flags[i, non_finite] = 1
+            faults[0] += 1
 
 
 def controller_predict(controller: RegisteredController, observation: Any) -> np.ndarray:

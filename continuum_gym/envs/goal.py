@@ -61,6 +61,8 @@ class ContinuumGoalEnv(gym.Env):
     """A goal-conditioned front end of a ``ContinuumGym/`` env (subclasses set ``base_id``)."""
 
     base_id: str = ""  #: the id of the env this is the goal-conditioned front end of
+    #: the front end's own keywords (not the env's config): ``goal_kwargs()`` reads them back as attributes
+    goal_keywords: tuple[str, ...] = ("reward_type",)
     goal_dim: int = GOAL_DIM
     metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 25}
 
@@ -79,6 +81,10 @@ class ContinuumGoalEnv(gym.Env):
         self.observation_space = spaces.Dict({"observation": self.base.observation_space,
                                               "achieved_goal": goal_space, "desired_goal": goal_space})
         self.action_space = self.base.action_space
+
+    def goal_kwargs(self) -> dict:
+        """The keywords of this front end itself (reward type, tolerances), to make it again (``save_config``)."""
+        return {name: getattr(self, name) for name in self.goal_keywords}
 
     def _check_goal_kwargs(self, kwargs: dict) -> None:  # pragma: no cover - overridden
         pass

@@ -168,13 +168,28 @@ def get_spec(env_id: str) -> EnvSpec:
         return ENV_SPECS[env_id]
     registered = _registered(env_id)
     if registered is not None:
-        entry = registered.entry_point if isinstance(registered.entry_point, str) else None
-        vector = registered.vector_entry_point if isinstance(registered.vector_entry_point, str) else None
         for spec in ENV_SPECS.values():
-            if entry == spec.entry_point or vector == spec.vector_entry_point:
+            if _names(registered.entry_point, spec.entry_point, spec.goal_entry_point) \
+                    or _names(registered.vector_entry_point, spec.vector_entry_point):
                 return spec
     raise ValueError(f"unknown env id {env_id!r}{closest(env_id, ENV_SPECS)}; valid ids: {sorted(ENV_SPECS)} "
                      "(or an id registered to their entry points)")
+
+
+def _names(entry: Any, *references: str) -> bool:
+    """Whether a registered entry point (a "module:name" string or the object) is one of ``references``: the same
+    string, or another path to the same class (``continuum_gym.envs.occlusion:OcclusionAvoidanceGoalEnv`` is
+    ``continuum_gym.envs.occlusion.goal:OcclusionAvoidanceGoalEnv``)."""
+    if entry is None:
+        return False
+    references = tuple(r for r in references if r)
+    if isinstance(entry, str) and entry in references:
+        return True
+    try:
+        target = load(entry) if isinstance(entry, str) else entry
+        return any(target is load(reference) for reference in references)
+    except (ImportError, AttributeError, ValueError):
+        return False
 
 
 def registered_kwargs(env_id: str) -> dict:

@@ -205,4 +205,35 @@ def as_trajectory(task: Any, kind: type[_T]) -> _T:
     return task
 
 
-__all__ = ["TipTrajectory", "DaVinciTrajectory", "hermite_point", "MAX_DURATION", "MAX_SAMPLES"]
+#: The sample fields of each kind of recording: what a trajectory is rebuilt from, bit for bit (its splines are
+#: computed from them again). ``save_config`` stores them in a ``.tasks.npz`` file, datasets inline in JSON.
+SAMPLE_FIELDS = {"TipTrajectory": ("times", "positions", "rotations", "start_q", "start_gamma"),
+                 "DaVinciTrajectory": ("times", "configurations")}
+
+
+def samples_of(trajectory: TipTrajectory | DaVinciTrajectory) -> dict[str, Any]:
+    """``{"type": class name, field: float64 array}`` of a recording's samples (fields that are None left out)."""
+    kind = type(trajectory).__name__
+    out: dict[str, Any] = {"type": kind}
+    for name in SAMPLE_FIELDS[kind]:
+        value = getattr(trajectory, name)
+        if value is not None:
+            out[name] = np.asarray(value, dtype=np.float64)
+    return out
+
+
+def from_samples(data: Any) -> TipTrajectory | DaVinciTrajectory:
+    """The recording ``samples_of`` (or its JSON form, nested lists) describes, validated as when it was made."""
+    if not isinstance(data, dict) or data.get("type") not in SAMPLE_FIELDS:
+        raise ValueError(f"a recorded trajectory must be a mapping with type {sorted(SAMPLE_FIELDS)} and its samples; "
+                         f"got {describe(data)}")
+    kind = TipTrajectory if data["type"] == "TipTrajectory" else DaVinciTrajectory
+    kwargs: dict[str, Any] = {name: np.asarray(data[name], dtype=np.float64)
+                              for name in SAMPLE_FIELDS[data["type"]] if data.get(name) is not None}
+    if "start_gamma" in kwargs:
+        kwargs["start_gamma"] = float(kwargs["start_gamma"])
+    return kind(**kwargs)
+
+
+__all__ = ["TipTrajectory", "DaVinciTrajectory", "hermite_point", "MAX_DURATION", "MAX_SAMPLES", "SAMPLE_FIELDS",
+           "samples_of", "from_samples"]

@@ -84,7 +84,9 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
                  camera: str = "external", pixel_occlusion: bool = False,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
         self.num_envs = integer(num_envs, "num_envs", low=1)
-        self.core = self.core_class(num_envs=self.num_envs, max_episode_steps=max_episode_steps, **kwargs)
+        if max_episode_steps is not None:  # else a given config's own limit stays
+            kwargs["max_episode_steps"] = max_episode_steps
+        self.core = self.core_class(num_envs=self.num_envs, **kwargs)
         self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
             self.metadata, self.core, render_mode, camera, pixel_occlusion)
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)

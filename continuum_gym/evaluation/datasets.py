@@ -36,6 +36,7 @@ from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.validation import choice, integer, number
 
 if TYPE_CHECKING:
+    import gymnasium
     from minari import MinariDataset
 
 NAMESPACE = "continuum-gym"
@@ -112,11 +113,18 @@ def collect_episodes(env_id: str, controller: str, *, split: str = "train", epis
                 infos[key].append(value)
             done = terminated or truncated
         buffers.append(EpisodeBuffer(id=k, seed=seed + k, options={"task_id": k},
-                                     observations=np.asarray(observations), actions=np.asarray(actions),
+                                     observations=_stacked(observations), actions=np.asarray(actions),
                                      rewards=rewards, terminations=terminations, truncations=truncations,
                                      infos={key: np.asarray(values) for key, values in infos.items()}))
     env.close()
     return buffers
+
+
+def _stacked(observations: list) -> Any:
+    """An episode's observations as one array, or a dict of arrays for a ``Dict`` observation (goal front ends)."""
+    if isinstance(observations[0], dict):
+        return {key: np.asarray([o[key] for o in observations]) for key in observations[0]}
+    return np.asarray(observations)
 
 
 def dataset_env_kwargs(controller: str, split: str, env_kwargs: dict | None = None) -> dict:
@@ -145,7 +153,6 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
         root: Minari data path to write under (default ``$MINARI_DATASETS_PATH`` or ``~/.minari/datasets``).
         overwrite: replace an existing dataset of the same id (else a ``FileExistsError``).
     """
-    import gymnasium as gym
 
     env_id, controller, split, episodes, noise, seed = check_dataset_arguments(
         env_id, controller, split, episodes, noise, seed)
@@ -160,10 +167,7 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
         minari.delete_dataset(name)
     buffers = collect_episodes(env_id, controller, split=split, episodes=episodes, noise=noise, seed=seed,
                                env_kwargs=env_kwargs, progress=progress)
-    # The spec the episodes were recorded with (recover_environment() rebuilds the env from it).
-    registered = gym.spec(env_id)
-    env_spec = dataclasses.replace(registered, kwargs={**registered.kwargs,
-                                                       **dataset_env_kwargs(controller, split, env_kwargs)})
+    env_spec = recorded_env_spec(env_id, dataset_env_kwargs(controller, split, env_kwargs))
     description = (f"{episodes} episodes of the {controller} baseline of {env_id} on task ids 0..{episodes - 1} of "
                    f"the {split} split" + (f", with Gaussian residuals of std {noise:g}" if noise else "")
                    + f"; seeds {seed}..{seed + episodes - 1}. Recorded by continuum-gym dataset.")
@@ -178,6 +182,27 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
             minari.delete_dataset(name)
         raise
     return dataset
+
+
+def recorded_env_spec(env_id: str, env_kwargs: dict) -> gymnasium.envs.registration.EnvSpec:
+    """The spec a dataset stores, from which ``recover_environment()`` rebuilds the env, in any process.
+
+    Its kwargs hold the whole configuration as ``EnvConfig.to_dict`` writes it (``{"config": ...}``): plain JSON
+    that Minari can store (a robot or a cone object it would flatten to a dict of fields that no constructor
+    takes), plug-ins as ``"module:name"`` references with the modules that register them (a bare name means
+    nothing in a fresh process) and recorded tasks with their samples. Its id, entry point and time limit are the
+    registered id's (a researcher's variant keeps its own id), and ``gym.make`` of the spec needs no registration.
+    """
+    import gymnasium as gym
+
+    env = gym.make(env_id, **env_kwargs)
+    try:
+        inner: Any = env.unwrapped  # a continuum-gym env: single or goal front end
+        config = inner.config.to_dict(recorded="inline")
+        extra = inner.goal_kwargs() if hasattr(inner, "goal_kwargs") else {}  # the goal front end's own keywords
+    finally:
+        env.close()
+    return dataclasses.replace(gym.spec(env_id), kwargs={"config": config, **extra})
 
 
 def minari_root() -> Path:

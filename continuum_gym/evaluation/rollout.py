@@ -70,6 +70,7 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     spec = core.spec
     core.reset_rows(np.arange(n), task_ids)
     active = np.ones(n, dtype=np.uint8)
+    faulted = core.non_finite().copy()  # rows with a value that is not finite (on_non_finite="truncate")
     sums: dict = {}
     finals: dict = {}
     counts = np.zeros(n)
@@ -92,9 +93,18 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
                 traces.setdefault(key, []).append(np.where(alive, value, np.nan))
         returns[alive] += rewards[alive]
         counts[alive] += 1
+        faulted |= alive & core.non_finite()
         active[alive & (terminated | truncated)] = 0
         if progress is not None:
             progress.update(1)
+    if faulted.any():
+        from continuum_gym.envs.faults import NonFiniteError
+
+        raise NonFiniteError(
+            f"{spec.env_id}: {int(faulted.sum())} of {n} episode(s) (task ids {task_ids[faulted][:8].tolist()}) had a "
+            "value that is not finite (info['non_finite']); their metrics are not numbers, and an average without "
+            "them would hide the failure, so none is reported. Find the plug-in with on_non_finite='raise' (the "
+            "default), which names it")
     out = {}
     for metric in spec.episode_metrics:
         if metric.reduce == "final":

@@ -50,7 +50,7 @@ class ReachCore(BatchedCore):
     spec = SPEC
     config_class = ReachConfig
     step_kernel = staticmethod(reach_step_batch)
-    terminated_flag, truncated_flag = Flag.TERMINATED, Flag.TRUNCATED
+    terminated_flag, truncated_flag, non_finite_flag = Flag.TERMINATED, Flag.TRUNCATED, Flag.NON_FINITE
     builtin_reward_names = REWARD_TERMS
     info_fields = INFO_FIELDS
     metric_columns = {"distance_m": Metric.DISTANCE}
@@ -84,7 +84,9 @@ class ReachCore(BatchedCore):
         self._env = ReachParams(self.control_dt, self.substeps, self.base_controller is not None,
                                 config.residual_scale, ACTION_SCALE, lower, upper,
                                 np.array([self.weights[name] for name in REWARD_TERMS]))
-        self._out = ReachOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
+        self._faults = np.zeros(1, dtype=np.int64)
+        self._out = ReachOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags,
+                                 self._faults)
         self._model = self.kernel_model()
 
     def kernel_model(self) -> tuple:

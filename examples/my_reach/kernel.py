@@ -13,7 +13,13 @@ from collections import namedtuple
 import numpy as np
 
 from continuum_gym.envs.columns import Block, Columns, Layout
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
+from continuum_gym.envs.common_kernels import (
+    OBSERVE_ONLY,
+    clip_observation,
+    desired_point,
+    mark_non_finite,
+    mark_non_finite_reward,
+)
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope_kernels import endoscope_kinematics, make_endoscope_workspace
@@ -31,6 +37,7 @@ class Flag(Columns):
     CLAMPED = "joint bits clamped at a limit"
     TERMINATED = "the distance is not finite"
     TRUNCATED = "the task's duration is over"
+    NON_FINITE = "a value of the row is not finite (the library raises, or ends the episode as truncated)"
 
 
 #: The observation, declared once: the kernel indexes it by block (``OBS.goal_error``), the docs table it.
@@ -54,7 +61,7 @@ GAIN = 20.0  #: Jacobian-transpose gain (1/s per m of error, per m of Jacobian)
 ReachState = namedtuple("ReachState", ["q", "steps"])
 ReachParams = namedtuple("ReachParams", ["control_dt", "substeps", "has_base", "residual_scale", "action_scale",
                                          "lower", "upper", "weights"])
-ReachOutputs = namedtuple("ReachOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
+ReachOutputs = namedtuple("ReachOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags", "faults"])
 
 
 @kernel(nogil=True)  # the threads of a large batch step rows in parallel
@@ -91,6 +98,7 @@ def reach_step_batch(state, actions, active, tasks, robot, env, custom, out, cla
                                   goal_rate, env, cmd)
             observe(i, q, p_ct, goal, cmd, env, out)
             out.metrics[i, Metric.DISTANCE] = distance
+            mark_non_finite(i, q, out, Flag.NON_FINITE)  # the library raises or truncates such a row
             if mode != OBSERVE_ONLY:
                 out.terms[i, 0] = -env.weights[0] * distance / 0.01
                 out.terms[i, 1] = -env.weights[1] * action_sq / 6.0
@@ -98,6 +106,7 @@ def reach_step_batch(state, actions, active, tasks, robot, env, custom, out, cla
                 out.flags[i, Flag.CLAMPED] = clamped
                 out.flags[i, Flag.TERMINATED] = 0 if math.isfinite(distance) else 1
                 out.flags[i, Flag.TRUNCATED] = 1 if state.steps[i] >= tasks.limit[i] else 0
+                mark_non_finite_reward(i, out, Flag.NON_FINITE)
         first, last = next_rows(claims, start, stop, first, last)
 
 

@@ -590,3 +590,30 @@ def test_actions_of_any_layout_step_the_same_compiled_kernel(env_id):
         for mine, theirs in zip(results[0][:3], results[1][:3]):
             np.testing.assert_array_equal(mine, theirs)
     assert len(kernel.signatures) == signatures
+
+
+def test_the_guard_limits_only_the_residuals_rotation_as_documented():
+    """Issue 54, item 5: what the guard guarantees is stated exactly. A joint residual that walks the tip out of
+    the view, with no endoscope residual, is not stopped (the guard never acts), as the docstring says."""
+    from continuum_gym.envs.occlusion.kernel import view_fraction_at
+
+    doc = OcclusionAvoidanceEnv.__doc__
+    assert "limits **only the\n    residual's endoscope rotation**" in doc and "nor the joint residual" in doc
+    env = OcclusionAvoidanceEnv(task="hold", task_split="test", residual_space="joint", residual_scale=2.0)
+    env.reset(seed=3)
+    core, cone = env.core, env.core.controller.params.cone
+
+    def fraction(q):
+        return view_fraction_at(core.robot.forward_kinematics(q)[0], float(core.gamma[0]), cone)
+
+    seen, guarded = [], []
+    for _ in range(150):  # ascend the tip's view fraction through the joints alone (finite differences)
+        q = core.q[0].copy()
+        grad = np.array([(fraction(q + 1e-6 * e) - fraction(q - 1e-6 * e)) / 2e-6 for e in np.eye(7)])
+        action = np.append(np.sign(grad), 0.0).astype(np.float32)
+        _, _, terminated, truncated, info = env.step(action)
+        seen.append(info["tip_view_fraction"])
+        guarded.append(info["visibility_guarded"])
+        if terminated or truncated:
+            break
+    assert max(seen) > 0.69 + 0.02 and not any(guarded)

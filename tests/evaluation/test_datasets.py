@@ -28,7 +28,8 @@ def test_a_dataset_round_trips_equal_to_a_fresh_rollout(root):
     loaded = minari.load_dataset(name)
     assert loaded.total_episodes == 2
     env = loaded.recover_environment()
-    assert env.spec.kwargs["base_controller"] == "resolved_rate" and env.spec.kwargs["task_split"] == "validation"
+    config = env.spec.kwargs["config"]  # the whole config, as EnvConfig.to_dict writes it
+    assert config["base_controller"] == "resolved_rate" and config["task_split"] == "validation"
     for k, episode in enumerate(loaded.iterate_episodes()):
         obs, _ = env.reset(seed=4 + k, options={"task_id": k})
         np.testing.assert_array_equal(episode.observations[0], obs)
@@ -87,3 +88,26 @@ def test_the_cli_writes_datasets_and_names_bad_arguments(root, capsys):
     assert "episodes" in capsys.readouterr().err
     assert main(["dataset", "--env", VIEW, "--controller", "resolved_rate", "--episodes", "1"]) == 2
     assert "overwrite" in capsys.readouterr().err
+
+
+def test_a_dataset_of_a_recorded_task_and_another_robot_rebuilds_them(root):
+    """Minari stores the env's config as plain JSON: a robot and a cone as their fields, a recorded task as its
+    samples (Minari itself would flatten the objects into dicts no constructor takes; issue 54, item 2)."""
+    from continuum_gym.envs import TipTrajectory
+    from continuum_gym.geometry import LensCone
+    from continuum_gym.robots import MultiBackboneRobot
+
+    robot = MultiBackboneRobot(lengths=(0.018,) * 4)
+    p0, R0 = robot.forward_kinematics(robot.home)
+    t = np.linspace(0.0, 1.0, 11)
+    path = p0 + 0.002 * np.stack([np.sin(3 * t), np.cos(3 * t) - 1, t], axis=1)
+    task = TipTrajectory(t, path, np.broadcast_to(R0, (11, 3, 3)), start_q=robot.home)
+    kwargs = {"robot": robot, "cone": LensCone(alpha=np.radians(45.0)), "task": task}
+    create_dataset(OCCLUSION, "minimum_norm", episodes=1, seed=2, env_kwargs=kwargs)
+    env = minari.load_dataset("continuum-gym/OcclusionAvoidance/minimum_norm-train-v0").recover_environment()
+    config = env.unwrapped.config
+    assert config.robot.lengths == robot.lengths and np.isclose(config.cone.alpha, np.radians(45.0))
+    env.reset(seed=2, options={"task_id": 0})
+    for time in (0.0, 0.37, 0.9):  # the rebuilt spline is the recorded one, bit for bit
+        np.testing.assert_array_equal(env.unwrapped.core.desired(0, time)[0], gym.make(
+            OCCLUSION, **kwargs).unwrapped.core.desired(0, time)[0])

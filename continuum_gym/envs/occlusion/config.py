@@ -60,7 +60,9 @@ class OcclusionConfig(EnvConfig):
             "0.05, 0.05, 10, 0.01; each in [0, 1e6])", type_name="dict"))
     visibility_guard: float | None = field(default=0.69, metadata=spec(
         unit="fraction of the cone half-angle", doc="the residual's endoscope rotation is cut where it would carry "
-        "the tip beyond this angle from the view axis (in (0, 1); `None`: off)", type_name="float or None"))
+        "the tip beyond this angle from the view axis (in (0, 1); `None`: off); it does not limit the joint residual "
+        "or the baseline, so it guarantees visibility only as far as the rotation goes (env docstring)",
+        type_name="float or None"))
     arc_plan: bool = field(default=False, metadata=spec(
         doc="on hold tasks the residual's base tracks a trajectory along the self-motion arc planned when the "
             "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks, and every task "

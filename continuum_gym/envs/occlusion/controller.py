@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import typeof, types
 
+from continuum_gym.envs.custom import record_fault
 from continuum_gym.robots.compiled import kernel
 
 if TYPE_CHECKING:
@@ -78,6 +79,7 @@ def predict(controller: CustomController, observation: dict) -> np.ndarray:
 def occlusion_slot_rates(custom, q, gamma, p_des, R_des, v_des, dt, robot, cone, out):
     """The registered OcclusionAvoidance controller of slot ``custom``: its command (dof + 1,) into ``out``."""
     custom.rates[0](q, gamma, p_des, R_des, v_des, dt, robot, cone, custom.params, out)
+    record_fault(custom, out)
 
 
 __all__ = ["RATES_DOC", "DEFAULT_DT", "rates_signature", "trial_rates", "predict", "occlusion_slot_rates"]

@@ -26,6 +26,7 @@ class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
         def core(self) -> OcclusionCore: ...
 
     goal_dim = GOAL_DIM + 1  # the pose and the state's VOI
+    goal_keywords = ("reward_type", "tolerance_m", "tolerance_rad")
 
     def __init__(self, reward_type: str = "dense", tolerance_m: float = 1e-3, tolerance_rad: float = 0.05,
                  **kwargs: Any) -> None:

@@ -33,6 +33,8 @@ from continuum_gym.envs.common_kernels import (
     clip_observation,
     desired_point,
     desired_rotation,
+    mark_non_finite,
+    mark_non_finite_reward,
 )
 from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
 from continuum_gym.envs.occlusion.outputs import (
@@ -74,9 +76,9 @@ OcclusionStepParams = namedtuple("OcclusionStepParams", [
     "gamma_rate_limit", "lower", "upper", "max_bend", "weights", "visibility_fraction", "visibility_guard",
 ])
 #: What a step writes: the cached baseline command (N, dof + 1) and its base_info (N, 2), observations,
-#: metrics, reward terms, rewards and flags.
+#: metrics, reward terms, rewards and flags, and ``faults`` (1,): the count of rows flagged ``NON_FINITE``.
 OcclusionOutputs = namedtuple("OcclusionOutputs", ["base_cmd", "base_info", "obs", "metrics", "terms", "rewards",
-                                                   "flags"])
+                                                   "flags", "faults"])
 #: Per-thread scratch of ``occlusion_step_row``.
 OcclusionStepWork = namedtuple("OcclusionStepWork", ["ws", "scratch", "qdot", "residual", "projected", "cmd", "p_des",
                                                      "v_des", "A", "B", "ones", "points", "lens", "dr", "w", "w_rate",
@@ -253,6 +255,7 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     metrics[i, Metric.VIEW_FRACTION] = view_fraction
     occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
                           base_cmd)
+    mark_non_finite(i, q, out, Flag.NON_FINITE)
 
 
 @kernel(inline="always")
@@ -385,6 +388,7 @@ def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rat
     for k in range(N_TERMS_REWARD):
         total += terms[i, k]
     out.rewards[i] = total
+    mark_non_finite_reward(i, out, Flag.NON_FINITE)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)

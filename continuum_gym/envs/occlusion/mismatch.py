@@ -27,7 +27,13 @@ from collections import namedtuple
 import numpy as np
 
 from continuum_gym.baselines.occlusion_kernels import wrap_angle
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clamp, desired_point, desired_rotation
+from continuum_gym.envs.common_kernels import (
+    OBSERVE_ONLY,
+    clamp,
+    desired_point,
+    desired_rotation,
+    mark_non_finite,
+)
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.occlusion.kernel import (
@@ -43,7 +49,7 @@ from continuum_gym.envs.occlusion.kernel import (
     substep_base_rates,
     view_fraction_at,
 )
-from continuum_gym.envs.occlusion.outputs import BaseInfo, Metric
+from continuum_gym.envs.occlusion.outputs import BaseInfo, Flag, Metric
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.geometry.lens_cone import ConeKernelArgs, lens_to_world_direction, to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
@@ -143,6 +149,7 @@ def mismatch_observe(i, state, tasks, robot, true_robot, prm, true_cone, env, cu
                                                  work.points, work.lens, work.dr)
     occlusion_observation(out.obs[i], i, n, qm, gamma, p_des[0] - ps[0], p_des[1] - ps[1], p_des[2] - ps[2], e_seen,
                           v_des, view_fraction, voi_estimate, t, tasks, env, base_cmd)
+    mark_non_finite(i, q, out, Flag.NON_FINITE)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)

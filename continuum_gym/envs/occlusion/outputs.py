@@ -56,6 +56,7 @@ class Flag(Columns):
     BASE_FROZEN = "joint bits the baseline froze at a limit (OR over the substeps)"
     BASE_SATURATED = "the baseline's rates were scaled down"
     GUARDED = "the visibility guard cut the residual's endoscope rotation"
+    NON_FINITE = "a value of the row is not finite (NaN or inf): the episode cannot be scored"
 
 
 class BaseInfo(Columns):

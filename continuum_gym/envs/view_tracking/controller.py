@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import typeof, types
 
+from continuum_gym.envs.custom import record_fault
 from continuum_gym.robots.compiled import kernel
 
 if TYPE_CHECKING:
@@ -63,6 +64,7 @@ def predict(controller: CustomController, observation: dict) -> np.ndarray:
 def view_slot_rates(custom, q, p_target, R_target, dt, robot, out):
     """The registered ViewTracking controller of slot ``custom``: its joint rates (6,) into ``out``."""
     custom.rates[0](q, p_target, R_target, dt, robot, custom.params, out)
+    record_fault(custom, out)
 
 
 __all__ = ["RATES_DOC", "DEFAULT_DT", "rates_signature", "trial_rates", "predict", "view_slot_rates"]

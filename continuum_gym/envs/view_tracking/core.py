@@ -53,6 +53,9 @@ INFO_FIELDS = (
     InfoField("clamped_joints", bits("flags", Flag.CLAMPED), None, "joints clamped at a limit (6,)"),
     InfoField("rate_saturated", column("flags", Flag.RATE_SATURATED, bool), bool,
               "joint rates scaled down to ``rate_limits``"),
+    InfoField("non_finite", column("flags", Flag.NON_FINITE, bool), bool,
+              "a value of the row was not finite (NaN or inf) and its episode ended as truncated (only with "
+              "``on_non_finite='truncate'``; its metrics are NaN)"),
     InfoField("base_command", attribute("base_cmd"), None, "the baseline's joint rates at the new state (6,)"),
     InfoField("task_id", attribute("tasks.task_id"), int, "task instance"),
     InfoField("elapsed_steps", attribute("steps"), int, "control steps since reset"),
@@ -66,7 +69,7 @@ class ViewTrackingCore(BatchedCore):
     config_class = ViewTrackingConfig
     builtin_reward_names = REWARD_TERMS
     step_kernel = staticmethod(view_step_batch)
-    terminated_flag, truncated_flag = Flag.TERMINATED, Flag.TRUNCATED
+    terminated_flag, truncated_flag, non_finite_flag = Flag.TERMINATED, Flag.TRUNCATED, Flag.NON_FINITE
     # A row costs ~3 us: at N = 64 waking a second thread costs more than it saves (benchmarks/batch.py times
     # one thread against all cores); from N = 128 it pays.
     parallel_min_rows = 128
@@ -128,7 +131,9 @@ class ViewTrackingCore(BatchedCore):
             control_dt=self.control_dt, has_base=has_base, residual_scale=self.residual_scale if has_base else 1.0,
             target_space=self.residual_space == "target", target_scale=TARGET_SHIFT_SCALE, action_scale=ACTION_SCALE,
             rate_limit=self.rate_limits, weights=np.array([self.weights[key] for key in REWARD_TERMS]))
-        self._out = ViewOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags)
+        self._faults = np.zeros(1, dtype=np.int64)
+        self._out = ViewOutputs(self.base_cmd, self.obs, self.metrics, self.terms, self.rewards, self.flags,
+                                self._faults)
         self._model = self.kernel_model()
         self.overlap_polish = config.overlap_polish
         lower, upper = self.robot.joint_limits

@@ -20,6 +20,7 @@ ENV_ID = ViewTrackingConfig.env_id
 class ViewTrackingGoalEnv(ContinuumGoalEnv):
     __doc__ = goal.__doc__
     base_id = ENV_ID
+    goal_keywords = ("reward_type", "or_threshold")
 
     if TYPE_CHECKING:  # the base env's core is this env's
         @property

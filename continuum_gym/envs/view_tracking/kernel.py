@@ -25,7 +25,13 @@ from continuum_gym.baselines.view_tracking import (
     view_rates_kernel,
 )
 from continuum_gym.envs.columns import legacy_names
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY, clip_observation, desired_point
+from continuum_gym.envs.common_kernels import (
+    OBSERVE_ONLY,
+    clip_observation,
+    desired_point,
+    mark_non_finite,
+    mark_non_finite_reward,
+)
 from continuum_gym.envs.row_claims import first_rows, next_rows
 from continuum_gym.envs.view_tracking.controller import view_slot_rates
 from continuum_gym.envs.view_tracking.outputs import OBS, OBS_DIM, POSITION_ERROR_SCALE, Flag, Metric
@@ -53,7 +59,7 @@ ViewState = namedtuple("ViewState", ["q", "steps"])
 ViewStepParams = namedtuple("ViewStepParams", ["control_dt", "has_base", "residual_scale", "target_space",
                                                "target_scale", "action_scale", "rate_limit", "weights"])
 #: What a step writes: the cached baseline command, observations, metrics, reward terms, rewards, flags.
-ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags"])
+ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags", "faults"])
 #: Per-thread scratch of a ViewTracking row's step (``view_step_rows``).
 ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "dv_rate", "p_dv", "R_dv", "p_tgt",
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
@@ -139,6 +145,7 @@ def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, ou
     metrics[i, Metric.POSITION_ERROR] = eps_p
     metrics[i, Metric.ORIENTATION_ERROR] = eps_r
     view_observation(out.obs[i], i, t, q, p_tgt, p_ct, e_w, ratio, q_dv, tasks, prm, dv, env, base_cmd)
+    mark_non_finite(i, q, out, Flag.NON_FINITE)
 
 
 @kernel
@@ -244,6 +251,7 @@ def finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scal
     for k in range(N_REWARD_TERMS):
         total += terms[i, k]
     out.rewards[i] = total
+    mark_non_finite_reward(i, out, Flag.NON_FINITE)
 
 
 @kernel(nogil=True)

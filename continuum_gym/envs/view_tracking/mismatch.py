@@ -22,7 +22,7 @@ from collections import namedtuple
 import numpy as np
 
 from continuum_gym.baselines.view_tracking import integrate_view_step
-from continuum_gym.envs.common_kernels import OBSERVE_ONLY
+from continuum_gym.envs.common_kernels import OBSERVE_ONLY, mark_non_finite
 from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
 from continuum_gym.envs.row_claims import first_rows, next_rows
@@ -33,7 +33,7 @@ from continuum_gym.envs.view_tracking.kernel import (
     view_command,
     view_observation,
 )
-from continuum_gym.envs.view_tracking.outputs import Metric
+from continuum_gym.envs.view_tracking.outputs import Flag, Metric
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope_kernels import EndoscopeKernelArgs, endoscope_kinematics
@@ -111,6 +111,7 @@ def view_mismatch_observe(i, state, tasks, robot, true_robot, prm, dv, frustum, 
     ratio_seen = ratio if exact_mount else overlap_ratio_inline(p_dv, R_dv, p_cam, R_body, frustum.tan_half,
                                                                 frustum.near, frustum.far, work.overlap)
     view_observation(out.obs[i], i, t, qm, p_tgt, p_seen, e_w, ratio_seen, q_dv, tasks, prm, dv, env, base_cmd)
+    mark_non_finite(i, q, out, Flag.NON_FINITE)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)

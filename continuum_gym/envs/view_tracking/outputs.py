@@ -50,8 +50,9 @@ class Flag(Columns):
 
     CLAMPED = "joint bits clamped at a limit"
     RATE_SATURATED = "rates scaled down to the rate limits"
-    TERMINATED = "the pose error is not finite"
+    TERMINATED = "the pose error is not finite (always with NON_FINITE: the env raises, or ends it as truncated)"
     TRUNCATED = "the task's duration is over"
+    NON_FINITE = "a value of the row is not finite (NaN or inf): the episode cannot be scored"
 
 
 __all__ = ["OBSERVATION", "OBS", "OBS_DIM", "TARGET_OBS_DIM", "Metric", "Flag", "POSITION_ERROR_SCALE"]
