@@ -114,6 +114,17 @@ def load_object(reference: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
+def lazy_exports(package: str, exports: dict[str, str]):
+    """A package's module ``__getattr__``: ``name`` from its submodule ``exports[name]``, imported on first use (so
+    that importing the package registers its ids without compiling anything)."""
+    def __getattr__(name: str) -> Any:
+        if name in exports:
+            return getattr(importlib.import_module(f"{package}.{exports[name]}"), name)
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return __getattr__
+
+
 def split_reference(value: str) -> tuple[str | None, str]:
     """``"my_lab.plugins:dls"`` -> ``("my_lab.plugins", "dls")``; a plain name -> ``(None, name)``."""
     if ":" not in value:
@@ -147,5 +158,5 @@ def reference(name: str, origin: str | None) -> str:
     return f"{origin}:{name}" if origin else name
 
 
-__all__ = ["load_object", "ENV_VAR", "ENTRY_POINT_GROUP", "caller_origin", "remember", "import_modules", "load_entry_points",
-           "load_known", "split_reference", "lookup", "reference"]
+__all__ = ["load_object", "lazy_exports", "ENV_VAR", "ENTRY_POINT_GROUP", "caller_origin", "remember", "import_modules",
+           "load_entry_points", "load_known", "split_reference", "lookup", "reference"]

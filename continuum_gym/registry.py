@@ -22,7 +22,7 @@ Compiled signatures (numba ``njit`` functions; arrays float64 and C-contiguous):
   -> None``; ``robot`` is ``ContinuumEndoscope.kernel_args()``.
 - Reward term (compiled): ``term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rates (k,),
   params (m,)) -> float64``, with the env's metric and flag columns (``Metric.*``, ``Flag.*`` of its
-  ``outputs`` module; ``METRIC_*``, ``FLAG_*`` of its kernel module still work) and the joint rates the
+  ``outputs`` module) and the joint rates the
   robot applied over the step (base and residual, after rate and joint limits; the action's index layout).
   ``term(metrics, flags, action, params)`` (no rates) works too.
 - Reward term (numpy, ``compiled=False``): ``fn(metrics: dict[str, (N,) array], actions (N, k), rates (N, k))
@@ -199,9 +199,3 @@ def unregister(name: str, env: str | None = None) -> None:
 __all__ = ["register_robot", "register_task", "register_controller", "register_reward_term", "unregister",
            "origin_of", "reference_of", "resolve", "robot_names", "controller_names", "CustomController", "RewardTerm",
            "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS", "ORIGINS"]
-
-
-def __getattr__(name: str):
-    from continuum_gym.envs.moved import moved
-
-    return moved(__name__, name)

@@ -146,10 +146,7 @@ ENV_PACKAGES = ("continuum_gym.envs.occlusion", "continuum_gym.envs.view_trackin
 #: Modules outside them that may name one environment's modules, and why.
 ENV_NAMING = {
     "continuum_gym.envs.registration": "BUILTIN_ENVS lists the library's environment packages",
-    "continuum_gym.envs.moved": "re-exports the names that moved into the packages, for users' old imports",
     "continuum_gym.envs": "re-exports the environments' classes (continuum_gym.envs.OcclusionConfig, ...)",
-    "continuum_gym.envs.occlusion_kernel": "the old import path of the kernel's column names (docs, users)",
-    "continuum_gym.envs.view_kernel": "the old import path of the kernel's column names (docs, users)",
     # one environment's own pieces in the layers above the environments, each named by its spec
     # (scene, optimum, warm_ups) or by its module name
     "continuum_gym.render.occlusion_scene": "the OcclusionAvoidance scene (spec.scene)",

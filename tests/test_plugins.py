@@ -16,11 +16,7 @@ from scipy.interpolate import CubicSpline
 
 import continuum_gym  # noqa: F401  (registers the ids)
 from continuum_gym.envs import ContinuumSB3VecEnv, DaVinciTrajectory, TipTrajectory
-from continuum_gym.envs.occlusion.kernel import (
-    FLAG_TERMINATED,
-    METRIC_TIP_ERROR,
-    METRIC_VOI,
-)
+from continuum_gym.envs.occlusion.outputs import Flag, Metric
 from continuum_gym.registry import (
     register_controller,
     register_reward_term,
@@ -241,7 +237,7 @@ def test_bad_controllers_are_refused_naming_the_problem(registered):
 # ---------------------------------------------------------------------- registered reward terms
 @njit(cache=True)
 def tip_error_mm(metrics, flags, action, params):
-    return -1e3 * metrics[METRIC_TIP_ERROR] - params[0] * flags[FLAG_TERMINATED]
+    return -1e3 * metrics[Metric.TIP_ERROR] - params[0] * flags[Flag.TERMINATED]
 
 
 def test_registered_reward_terms_are_added_and_reported(registered):
@@ -259,8 +255,8 @@ def test_registered_reward_terms_are_added_and_reported(registered):
     venv.reset(seed=0)
     _, rewards, _, _, infos = venv.step(np.zeros((3, 8), dtype=np.float32))
     core = venv.unwrapped.core
-    np.testing.assert_allclose(infos["reward_terms"]["tip_error_mm"], 0.5 * -1e3 * core.metrics[:, METRIC_TIP_ERROR])
-    np.testing.assert_allclose(infos["reward_terms"]["voi_squared"], 2.0 * -core.metrics[:, METRIC_VOI] ** 2)
+    np.testing.assert_allclose(infos["reward_terms"]["tip_error_mm"], 0.5 * -1e3 * core.metrics[:, Metric.TIP_ERROR])
+    np.testing.assert_allclose(infos["reward_terms"]["voi_squared"], 2.0 * -core.metrics[:, Metric.VOI] ** 2)
     np.testing.assert_allclose(rewards, core.terms.sum(axis=1), rtol=1e-12)
     with pytest.raises(ValueError, match="signature"):
         register_reward_term("bad", njit(lambda metrics: 0.0))

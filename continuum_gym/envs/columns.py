@@ -7,7 +7,6 @@ the documentation are made from that declaration, so the two cannot drift apart:
 * :class:`Columns`, for arrays with a fixed set of named columns (``metrics``, ``flags``): an ``IntEnum``
   whose members are the column indices (numba compiles ``metrics[i, Metric.VOI]`` to a constant index,
   as it would ``metrics[i, 0]``) and carry their description; ``table()`` is the docs' table.
-  ``legacy_names`` serves the flat constants of earlier releases (``METRIC_VOI``, ``N_METRICS``).
 * :class:`Layout`, for an observation made of consecutive blocks whose lengths may grow with the robot's
   number of segments: ``offsets()`` is a namedtuple of each block's start as ``(per_segment, constant)``
   (read in a kernel with :func:`at`; ``starts()``: plain ints when no block grows), ``width(n)`` the
@@ -17,7 +16,6 @@ the documentation are made from that declaration, so the two cannot drift apart:
 from __future__ import annotations
 
 from collections import namedtuple
-from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
@@ -50,27 +48,6 @@ class Columns(IntEnum):
     def names(cls) -> tuple[str, ...]:
         """The members' names in column order."""
         return tuple(c.name for c in cls)
-
-
-def legacy_names(module_name: str, **prefixed: type[Columns]) -> Callable[[str], Any]:
-    """A module ``__getattr__`` serving a declaration's columns under earlier flat names.
-
-    ``legacy_names(__name__, METRIC_=Metric)`` answers ``METRIC_VOI`` with ``Metric.VOI`` and ``N_METRICS``
-    with ``len(Metric)`` (the ``N_`` name is the prefix's plural), so ``from ...kernel import METRIC_VOI``
-    keeps working in users' reward terms.
-    """
-    flat: dict[str, int] = {}
-    for prefix, columns in prefixed.items():
-        flat.update({prefix + c.name: c for c in columns})
-        flat["N_" + prefix.rstrip("_") + "S"] = len(columns)
-
-    def __getattr__(name: str) -> int:
-        try:
-            return flat[name]
-        except KeyError:
-            raise AttributeError(f"module {module_name!r} has no attribute {name!r}") from None
-
-    return __getattr__
 
 
 @dataclass(frozen=True)

@@ -91,8 +91,6 @@ class EnvConfig:
     #: module registers the controller when first named); ``continuum-gym evaluate`` gives each a row beside the
     #: analytic baselines
     packaged_controllers: ClassVar[tuple] = ()
-    #: Keyword arguments accepted for backward compatibility that must stay at None here.
-    foreign_keywords: ClassVar[tuple] = ()
     #: Keywords whose objects (robot, endoscope, model error) may also be given as ``to_dict()`` writes them.
     object_keywords: ClassVar[tuple] = ("robot", "model_error")
     #: The trajectory class of the env's tasks (``TipTrajectory`` / ``DaVinciTrajectory``), as "module:Class".
@@ -131,11 +129,7 @@ class EnvConfig:
         """Build from the keyword arguments of ``gym.make``; an unknown name raises ``UnknownArgumentError``."""
         names = cls.keyword_names()
         for key in list(kwargs):
-            if key in cls.foreign_keywords:
-                if kwargs.pop(key) is not None:
-                    raise ValueError(f"{key} applies to another environment, not {cls.env_id}; valid arguments: "
-                                     f"{sorted(names)}")
-            elif key not in names:
+            if key not in names:
                 raise UnknownArgumentError(f"{cls.env_id} got an unexpected keyword argument {key!r}"
                                            f"{closest(key, names)}; valid arguments: {sorted(names)}")
             elif key in cls.object_keywords and isinstance(kwargs[key], dict) and "type" in kwargs[key]:
@@ -382,9 +376,3 @@ def _config_from_pickle(cls: type[EnvConfig], kwargs: dict, modules: list) -> En
 
 __all__ = ["UnknownArgumentError", "EnvConfig", "TASK_SPLITS", "spec", "model_error_field", "randomize_field",
            "check_common", "check_model_error", "resolve_robot"]
-
-
-def __getattr__(name: str):
-    from continuum_gym.envs.moved import moved
-
-    return moved(__name__, name)

@@ -125,9 +125,3 @@ class ContinuumGoalEnv(gym.Env):
 
 
 __all__ = ["ContinuumGoalEnv", "REWARD_TYPES", "GOAL_DIM", "pose_goal", "split_goal"]
-
-
-def __getattr__(name: str):
-    from continuum_gym.envs.moved import moved
-
-    return moved(__name__, name)

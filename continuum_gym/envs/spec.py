@@ -218,9 +218,3 @@ def _registered(env_id: str):
 
 __all__ = ["EnvSpec", "Metric", "EpisodeMetric", "TaskSet", "ReferenceRow", "ENV_SPECS", "get_spec",
            "registered_kwargs", "registered_base"]
-
-
-def __getattr__(name: str):
-    from continuum_gym.envs.moved import moved
-
-    return moved(__name__, name)

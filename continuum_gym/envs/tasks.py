@@ -189,9 +189,3 @@ def reach_pose(robot: MultiBackboneRobot, p: np.ndarray, R: np.ndarray, max_bend
 
 __all__ = ["TaskBatch", "TaskContext", "empty_batch", "copy_rows", "grown", "row_indices", "split_rng",
            "sines_through", "reach_pose", "SPLIT_CODE", "N_TERMS", "UNBOUNDED"]
-
-
-def __getattr__(name: str):
-    from continuum_gym.envs.moved import moved
-
-    return moved(__name__, name)

@@ -50,7 +50,7 @@ CHILD = textwrap.dedent('''
 
     import gymnasium as gym
     import continuum_gym
-    from continuum_gym.envs.occlusion.kernel import METRIC_TIP_ERROR
+    from continuum_gym.envs.occlusion.outputs import Metric
     from continuum_gym.registry import register_controller, register_reward_term
     from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
 
@@ -67,7 +67,7 @@ CHILD = textwrap.dedent('''
 
     @njit
     def tip_error_mm(metrics, flags, action, params):
-        return -1e3 * metrics[METRIC_TIP_ERROR]
+        return -1e3 * metrics[Metric.TIP_ERROR]
 
     env_id, kwargs = sys.argv[1], json.loads(sys.argv[2])
     if kwargs.get("base_controller") == "allocating_tracker":

@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from continuum_gym.envs.columns import Block, Columns, Layout, legacy_names
+from continuum_gym.envs.columns import Block, Columns, Layout
 from continuum_gym.envs.occlusion import outputs as occ
 from continuum_gym.envs.view_tracking import outputs as view
 from continuum_gym.robots import MultiBackboneRobot
@@ -62,10 +62,6 @@ def test_layouts_and_columns_reject_what_they_cannot_declare():
 
     assert [int(c) for c in Two] == [0, 1] and Two.SECOND.doc == "the second"
     assert Two.table("X_") == "- 0: `X_FIRST` - the first\n- 1: `X_SECOND` - the second"
-    flat = legacy_names("somewhere", X_=Two)
-    assert flat("X_SECOND") == 1 and flat("N_XS") == 2
-    with pytest.raises(AttributeError, match="somewhere.*X_THIRD"):
-        flat("X_THIRD")
 
 
 @pytest.mark.parametrize("n", [2, 3])

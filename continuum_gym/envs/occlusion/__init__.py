@@ -7,17 +7,14 @@ ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER 
 first use, so importing the package registers the id without compiling anything.
 """
 
-from continuum_gym.envs.moved import lazy_exports
 from continuum_gym.envs.occlusion.spec import SPEC
+from continuum_gym.plugins import lazy_exports
 
 _EXPORTS = {
     "OcclusionAvoidanceEnv": "core", "OcclusionAvoidanceVectorEnv": "core", "OcclusionCore": "core",
     "INFO_FIELDS": "core", "OcclusionConfig": "config", "OcclusionAvoidanceGoalEnv": "goal",
     "Metric": "outputs", "Flag": "outputs", "OBSERVATION": "outputs",
-    "REWARD_TERMS": "kernel", "METRIC_VOI": "kernel", "METRIC_TIP_ERROR": "kernel",
-    "METRIC_ORIENTATION_ERROR": "kernel", "METRIC_VIEW_FRACTION": "kernel", "FLAG_TERMINATED": "kernel",
-    "FLAG_TRUNCATED": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_GUARDED": "kernel",
-}
+    "REWARD_TERMS": "kernel", }
 __all__ = ["SPEC", *sorted(_EXPORTS)]
 
 __getattr__ = lazy_exports(__name__, _EXPORTS)

@@ -26,7 +26,7 @@ from continuum_gym.baselines.occlusion_kernels import (
     occlusion_rates_kernel,
     wrap_angle,
 )
-from continuum_gym.envs.columns import at, legacy_names
+from continuum_gym.envs.columns import at
 from continuum_gym.envs.common_kernels import (
     OBSERVE_ONLY,
     clamp,
@@ -461,10 +461,6 @@ def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom,
                 occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work)
         first, last = next_rows(claims, start, stop, first, last)
 
-
-#: The flat column names of earlier releases (``METRIC_VOI``, ``FLAG_TERMINATED``, ``N_METRICS``, ...), still
-#: importable from here for users' compiled reward terms.
-__getattr__ = legacy_names(__name__, METRIC_=Metric, FLAG_=Flag)
 
 __all__ = ["occlusion_step_batch", "REWARD_TERMS", "Metric", "Flag", "BaseInfo", "OBSERVATION",
            "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]

@@ -7,17 +7,14 @@ ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER 
 first use, so importing the package registers the id without compiling anything.
 """
 
-from continuum_gym.envs.moved import lazy_exports
 from continuum_gym.envs.view_tracking.spec import SPEC
+from continuum_gym.plugins import lazy_exports
 
 _EXPORTS = {
     "ViewTrackingEnv": "core", "ViewTrackingVectorEnv": "core", "ViewTrackingCore": "core", "INFO_FIELDS": "core",
     "ACTION_SCALE": "core", "ViewTrackingConfig": "config", "ViewTrackingGoalEnv": "goal",
     "Metric": "outputs", "Flag": "outputs", "OBSERVATION": "outputs",
-    "REWARD_TERMS": "kernel", "METRIC_OR": "kernel", "METRIC_POSITION_ERROR": "kernel",
-    "METRIC_ORIENTATION_ERROR": "kernel", "FLAG_CLAMPED": "kernel", "FLAG_RATE_SATURATED": "kernel",
-    "FLAG_TERMINATED": "kernel", "FLAG_TRUNCATED": "kernel",
-}
+    "REWARD_TERMS": "kernel", }
 __all__ = ["SPEC", *sorted(_EXPORTS)]
 
 __getattr__ = lazy_exports(__name__, _EXPORTS)

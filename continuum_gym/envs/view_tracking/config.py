@@ -33,7 +33,6 @@ class ViewTrackingConfig(EnvConfig):
     env_id: ClassVar[str] = "ContinuumGym/ViewTracking-v0"
     baselines: ClassVar[tuple] = ("resolved_rate", "dimension_reduced")
     packaged_controllers: ClassVar[tuple] = ("continuum_gym.agents.distilled_view:distilled_optimum",)
-    foreign_keywords: ClassVar[tuple] = ("max_bend", "lens_model")
     default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
                                        "overlap_bonus": 0.0}
     residual_spaces: ClassVar[tuple] = ("joint", "target")

@@ -24,7 +24,6 @@ from continuum_gym.baselines.view_tracking import (
     view_errors,
     view_rates_kernel,
 )
-from continuum_gym.envs.columns import legacy_names
 from continuum_gym.envs.common_kernels import (
     OBSERVE_ONLY,
     clip_observation,
@@ -258,7 +257,7 @@ def finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scal
 def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, claims,
                     start, stop):
     """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
-    marked ``OBSERVE_ONLY`` (releases the GIL; rows claimed from ``claims``: see occlusion_kernel)."""
+    marked ``OBSERVE_ONLY`` (releases the GIL; rows claimed from ``claims``: see occlusion.kernel)."""
     work = make_view_step_work()
     first, last = first_rows(claims, start, stop)
     while first < last:
@@ -285,7 +284,3 @@ def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, 
         if step:
             finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
 
-
-#: The flat column names of earlier releases (``METRIC_OR``, ``FLAG_TERMINATED``, ``N_METRICS``, ...), still
-#: importable from here for users' compiled reward terms.
-__getattr__ = legacy_names(__name__, METRIC_=Metric, FLAG_=Flag)
