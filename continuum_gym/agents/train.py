@@ -39,6 +39,7 @@ import yaml
 from continuum_gym.agents.evaluation_callback import history_until, make_eval_callback
 from continuum_gym.agents.run_inputs import (
     SCHEDULE_KEYS,
+    check_budget,
     check_combination,
     check_hyperparams,
     load_hyperparams,
@@ -250,6 +251,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     total = whole_number("steps", steps) if steps is not None else hp["n_timesteps"]
     n = whole_number("n_envs", n_envs) if n_envs is not None else hp.get("n_envs", RUN_DEFAULTS["n_envs"])
     check_combination(algo, hp, n, source)
+    little = check_budget(_algo_class(algo), hp, total, base is not None, source,
+                          "--steps" if steps is not None else "n_timesteps")
     run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
@@ -270,6 +273,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
         venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{source}: env_kwargs: {error}") from None
+    if little:
+        notice(little)
     run_dir.mkdir(parents=True, exist_ok=True)
     with _exclusive(run_dir):
         unit, done = _starting_point(run_dir, resume, total)
