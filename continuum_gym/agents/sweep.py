@@ -36,14 +36,13 @@ import numpy as np
 import yaml
 
 from continuum_gym.agents.cluster import connect
-from continuum_gym.agents.run_inputs import check_budget, output_directory, seed_number, whole_number
+from continuum_gym.agents.run_inputs import output_directory, seed_number, whole_number
 from continuum_gym.agents.train import (
     ALGOS,
-    _algo_class,
+    check_steps,
     default_base,
     headline_metric,
     load_hyperparams,
-    resolve_hyperparams,
     run_name,
     train,
     validate,
@@ -202,10 +201,7 @@ def sweep(env_id: str, algo: str, base: str | None, seeds: Sequence[int], steps:
     search_spec: dict[str, Any] = load_search(search, algo, env_id) if search else {
         "method": "grid", "num_samples": 1, "scheduler": "none", "asha": {}, "space": {}}
     if not {"burn_in_steps", "learning_starts", "n_timesteps"} & set(search_spec["space"]):  # else per trial
-        hp = resolve_hyperparams(algo, env_id, hyperparams)
-        if steps is not None or "n_timesteps" in hp:
-            check_budget(_algo_class(algo), hp, steps or hp["n_timesteps"], base is not None,
-                         f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]")
+        check_steps(algo, env_id, base, steps, hyperparams)
     try:
         import ray
         from ray import tune

@@ -110,6 +110,18 @@ def validate(env_id: str, algo: str, base: str | None) -> str | None:
                          f"controller or none. {error}") from None
 
 
+def check_steps(algo: str, env_id: str, base: str | None, steps: int | None,
+                hyperparams: Path | str | None = None) -> str | None:
+    """``run_inputs.check_budget`` for the block ``train`` would read: ``ValueError`` if ``steps`` (None: the
+    block's ``n_timesteps``) trains nothing, a warning if it trains the actor little, else None."""
+    hp = resolve_hyperparams(algo, env_id, hyperparams)
+    if steps is None and "n_timesteps" not in hp:
+        return None
+    source = f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]"
+    return check_budget(_algo_class(algo), hp, steps if steps is not None else hp["n_timesteps"], base is not None,
+                        source, "--steps" if steps is not None else "n_timesteps")
+
+
 def default_base(env_id: str) -> str | None:
     """The base an id trains on by default: the one it was registered with, else its env's headline baseline."""
     registered = registered_kwargs(env_id)
