@@ -320,8 +320,14 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
             if remaining > 0:
                 from stable_baselines3.common.callbacks import CallbackList
 
-                model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
-                            reset_num_timesteps=unit is None, tb_log_name="tb", progress_bar=progress)
+                from continuum_gym.agents.progress import ProgressBar, rollout_steps, training_end
+
+                end = training_end(model, total)
+                if end != total:
+                    notice(f"training ends at step {end}: {total} steps rounded up to whole rollouts of "
+                           f"{rollout_steps(model)} steps (n_envs x {'n_steps' if algo == 'ppo' else 'train_freq'})")
+                model.learn(total_timesteps=remaining, reset_num_timesteps=unit is None, tb_log_name="tb",
+                            callback=CallbackList(callbacks + ([ProgressBar(total)] if progress else [])))
                 saver.save()
             save_model_atomic(model, run_dir / "model.zip")
         finally:

@@ -119,6 +119,29 @@ def test_a_run_stopped_before_its_first_checkpoint_starts_again(tmp_path, monkey
         assert len((run_dir / "command.txt").read_text().splitlines()) == 2
 
 
+def test_the_progress_bar_of_a_resumed_run_counts_from_its_checkpoint_to_the_step_it_ends_at(tmp_path, monkeypatch,
+                                                                                              capsys):
+    """Resumed at step 256 towards 1000 steps: PPO trains whole rollouts of 128, so the run ends at 1024. The bar
+    starts at 256/1024 and ends at 1024/1024, never past its total (SB3's own read 768/744 here)."""
+    import re
+
+    from stable_baselines3 import PPO
+
+    hp = _hyperparams(tmp_path, n_timesteps=1000)
+    with monkeypatch.context() as patch:
+        _kill_at_write(patch, 3)
+        with pytest.raises(Killed):
+            _run(tmp_path, hp)
+    capsys.readouterr()
+    run_dir = train(VIEW, "ppo", seed=0, out=tmp_path / "runs", hyperparams=hp, progress=True, resume=True)
+    err = capsys.readouterr().err
+    shown = [(int(n), int(total)) for n, total in re.findall(r"(\d+)/(\d+) steps", err.replace(",", ""))]
+    assert shown and shown[0] == (256, 1024) and shown[-1] == (1024, 1024), shown
+    assert all(n <= total for n, total in shown)
+    assert "ends at step 1024" in err and "whole rollouts of 128" in err
+    assert PPO.load(run_dir / "model.zip", device="cpu").num_timesteps == 1024
+
+
 def test_sigkill_while_publishing_a_unit_keeps_the_previous_one(tmp_path, capsys):
     hp = _hyperparams(tmp_path)
     script = (
