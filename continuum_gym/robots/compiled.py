@@ -237,18 +237,18 @@ class CompileAnnouncer(numba_event.Listener):
 
     def on_start(self, event: numba_event.Event) -> None:
         stack = self._local.__dict__.setdefault("stack", [])
-        dispatcher = event.data["dispatcher"]
-        py_func = getattr(dispatcher, "py_func", None)
+        dispatcher = (event.data or {}).get("dispatcher")
+        py_func = getattr(dispatcher, "py_func", None)  # None for numba's lifted loops: part of their function
         cached = not isinstance(getattr(dispatcher, "_cache", None), NullCache)
         module = getattr(py_func, "__module__", None) or ""
-        named = (cached or not module.startswith("numba")) and not any(stack)
+        named = py_func is not None and (cached or not module.startswith("numba")) and not any(stack)
         stack.append(named)
         self.count += named
         if named and compile_messages_enabled():
-            where = ("cached on disk afterwards; `continuum-gym precompile` compiles ahead of time" if cached else
-                     "not cached: it compiles again in every process; declare it @njit(cache=True)")
-            print(f"continuum-gym: compiling {module}.{getattr(py_func, '__qualname__', dispatcher)} with numba "
-                  f"(seconds to minutes, once: {where})", file=sys.stderr, flush=True)
+            where = ("once: cached on disk afterwards; `continuum-gym precompile` compiles ahead of time" if cached
+                     else "not cached: it compiles again in every process; declare it @njit(cache=True)")
+            print(f"continuum-gym: compiling {module}.{getattr(py_func, '__qualname__', '?')} with numba "
+                  f"(seconds to minutes, {where})", file=sys.stderr, flush=True)
 
     def on_end(self, event: numba_event.Event) -> None:
         stack = self._local.__dict__.get("stack")

@@ -123,6 +123,24 @@ def test_a_compile_names_its_kernel_once_and_a_cache_hit_says_nothing(toy_tree):
     assert stats["misses"] == 1 and said == []  # compiled again, silenced
 
 
+def test_a_users_uncached_kernel_is_named_with_the_advice_to_cache_it(capsys, monkeypatch):
+    import numba
+
+    monkeypatch.delenv("CONTINUUM_GYM_COMPILE_MESSAGES", raising=False)
+
+    @numba.njit
+    def users_kernel(x):
+        return 2.0 * x
+
+    before = compiled.ANNOUNCER.count
+    assert users_kernel(1.5) == 3.0
+    said = [line for line in capsys.readouterr().err.splitlines() if "compiling" in line]
+    assert len(said) == 1 and ".users_kernel with numba" in said[0] and "@njit(cache=True)" in said[0]
+    assert compiled.ANNOUNCER.count == before + 1
+    users_kernel(2.5)  # compiled already: nothing more
+    assert "compiling" not in capsys.readouterr().err and compiled.ANNOUNCER.count == before + 1
+
+
 def test_set_built_from_other_sources_is_ignored(toy_tree):
     run_child(toy_tree, "write")
     stale = run_child(toy_tree, "stale")
