@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: setup setup-test precompile demo lint test test-fast bench reproduce reference-results figures docs clean
+.PHONY: setup setup-test precompile demo lint test test-fast bench reproduce reference-results figures docs docs-text clean
 
 # The main job installs what it needs; `make test` adds the test extras (pytest, rl_zoo3, Ray) on top.
 $(STAMP): pyproject.toml
@@ -64,6 +64,11 @@ bench: setup-test
 	$(BIN)/python benchmarks/kinematics.py --json results/bench/kinematics.json
 	$(BIN)/python benchmarks/envs.py --json results/bench/envs.json
 	$(BIN)/python benchmarks/memory.py --json results/bench/memory.json
+
+# The generated text of the docs' pages (env docstrings, the variant tutorial's module) between their markers,
+# so that they read in the repository as on the site; tests/test_docs_generated.py fails when it is stale.
+docs-text: setup
+	$(BIN)/python docs/hooks.py
 
 # The docs site (MkDocs Material): HTML in build/docs, every warning an error (also run by the tests).
 docs: setup

@@ -6,6 +6,11 @@ compiled kernels go to the precompiled set (:mod:`continuum_gym.robots.compiled`
 new directory and moved into place when complete, so a killed run leaves the previous set (or none),
 never half of one. ``make setup`` runs it; so should an image or wheel build (``--portable`` for code
 that runs on any x86-64 CPU).
+
+``continuum-gym precompile --import MODULE --env ID`` compiles what ``gym.make(ID)`` of a user's id builds and
+steps (its robot, its own controller and reward terms, its model error if the id sets one; and its native vector
+env) in this process, into numba's cache where run-time compiles go: the first ``gym.make(ID)`` afterwards
+compiles nothing. The packaged set is left as it is (it holds the package's environments only).
 """
 
 from __future__ import annotations
@@ -39,6 +44,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "as fast as code compiled for this CPU, same bits: see the README)")
     parser.add_argument("--check", action="store_true",
                         help="only report whether the set matches these sources (exit status 1 if not)")
+    parser.add_argument("--env", nargs="+", default=None, metavar="ID",
+                        help="compile what gym.make(ID) builds and steps for these ids instead, e.g. your variant's "
+                        "(with --import MODULE), into numba's cache: its first gym.make then compiles nothing")
     parser.add_argument(_WORKER_FLAG, default=None, choices=_env_ids(), help=argparse.SUPPRESS)
 
 
@@ -94,6 +102,42 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     report("done")
 
 
+def warm_up_id(env_id: str) -> None:
+    """Build and step what ``gym.make(env_id)`` builds, with the keywords the id was registered with, and its native
+    vector env (one and two threads) when the id has one: every kernel they run is compiled (or loaded) now."""
+    import gymnasium as gym
+
+    _step_twice(gym.make(env_id))
+    if gym.spec(env_id).vector_entry_point is not None:
+        for num_threads in (1, 2):
+            _step_twice(gym.make_vec(env_id, num_envs=4, vectorization_mode="vector_entry_point",
+                                     num_threads=num_threads))
+
+
+def compile_ids(env_ids: list) -> int:
+    """``precompile --env``: :func:`warm_up_id` of each id, saying what it did; the exit status."""
+    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.robots.compiled import ANNOUNCER
+
+    try:
+        for env_id in env_ids:
+            get_spec(env_id)
+    except ValueError as error:
+        print(f"continuum-gym precompile: {error}", file=sys.stderr)
+        return 2
+    before = 0  # the first id's count includes what importing its plug-ins compiled (e.g. its controller)
+    for env_id in env_ids:
+        print(f"continuum-gym precompile: compiling what gym.make({env_id!r}) runs (a minute or a few, once)",
+              file=sys.stderr, flush=True)
+        start = time.perf_counter()
+        warm_up_id(env_id)
+        compiled, before = ANNOUNCER.count - before, ANNOUNCER.count
+        done = (f"{compiled} kernel(s) compiled, now in numba's cache ({time.perf_counter() - start:.0f} s)"
+                if compiled else "nothing to compile, every kernel was cached already")
+        print(f"continuum-gym precompile: {env_id}: {done}; its first gym.make compiles nothing", flush=True)
+    return 0
+
+
 def _step_twice(env) -> None:
     """Reset and two seeded random steps: every kernel of a reset and a step compiles."""
     env.reset(seed=0)
@@ -122,7 +166,8 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
     out.parent.mkdir(parents=True, exist_ok=True)
     building = out.with_name(f"{out.name}.building-{os.getpid()}")
     shutil.rmtree(building, ignore_errors=True)
-    environ = dict(os.environ, CONTINUUM_GYM_PRECOMPILED_DIR=str(building))
+    # The workers' progress is the bar: their per-kernel compile lines would only interleave with it.
+    environ = dict(os.environ, CONTINUUM_GYM_PRECOMPILED_DIR=str(building), CONTINUUM_GYM_COMPILE_MESSAGES="0")
     if portable:
         environ["NUMBA_CPU_NAME"] = PORTABLE_CPU
     start = time.perf_counter()
@@ -222,6 +267,14 @@ def run(args: argparse.Namespace) -> int:
         with writing_precompiled(layer=args.worker.split("/")[-1]):
             warm_up(args.worker, lambda message: print(_PROGRESS, message, flush=True))
         return 0
+    if args.env:
+        given = [flag for flag, value in (("--check", args.check), ("--out", args.out), ("--portable", args.portable))
+                 if value]
+        if given:
+            print(f"continuum-gym precompile: {' and '.join(given)} concern the packaged set; --env compiles into "
+                  "numba's cache (where run-time compiles go): leave one or the other out", file=sys.stderr)
+            return 2
+        return compile_ids(args.env)
     from continuum_gym.robots.compiled import precompiled_dir
 
     out = Path(args.out) if args.out else precompiled_dir()

@@ -23,3 +23,19 @@ def test_help_imports_nothing_heavy(command):
     assert "usage: continuum-gym" in result.stdout
     loaded = result.stdout.rsplit("HEAVY:", 1)[1].strip()
     assert loaded == "", f"continuum-gym {command} --help imported {loaded}"
+
+
+@pytest.mark.parametrize("command", ["train", "evaluate", "render", "dataset", "optimum", "sweep", "precompile"])
+def test_an_unknown_env_id_tells_how_to_register_ones_own(command, capsys, tmp_path):
+    """Every command that takes --env says that a user's id is registered at import of a module, and how."""
+    from continuum_gym.cli import main
+    from continuum_gym.plugins import ENTRY_POINT_GROUP, ENV_VAR
+
+    out = tmp_path / "out"
+    where = {"dataset": ["--root", str(out)], "precompile": []}.get(command, ["--out", str(out)])
+    assert main([command, "--env", "MyLab/Occlusion4Seg-v0", *where]) == 2
+    err = capsys.readouterr().err
+    assert "unknown env id 'MyLab/Occlusion4Seg-v0'" in err
+    for needle in ("registered at import of", "continuum-gym --import MODULE", ENTRY_POINT_GROUP, f"{ENV_VAR}=MODULE"):
+        assert needle in err, needle
+    assert not out.exists()

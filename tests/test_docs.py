@@ -85,7 +85,8 @@ def test_the_variant_tutorials_shell_blocks_run_as_written(tmp_path):
         assert result.returncode == 0, f"variant.md: shell block {index + 1} failed:\n{code}\n{result.stderr[-3000:]}"
         outputs.append(result.stdout)
     assert "registered MyLab/Occlusion2Seg-v0" in outputs[0]
-    assert "config.yml" in outputs[1] and "model.zip" in outputs[1]
+    assert "MyLab/Occlusion2Seg-v0: " in outputs[1] and "its first gym.make compiles nothing" in outputs[1]
+    assert "config.yml" in outputs[2] and "model.zip" in outputs[2]
     import json
 
     table = json.loads((tmp_path / "results" / "variant" / "results.json").read_text())["MyLab/Occlusion2Seg-v0"]

@@ -300,6 +300,36 @@ def check_combination(algo: str, hp: dict, n_envs: int, source: str) -> None:
                              f"{hp.get('n_steps', 2048)} * {n_envs}")
 
 
+def check_budget(cls: type[BaseAlgorithm], hp: dict, total: int, residual: bool, source: str,
+                 budget: str = "--steps") -> str | None:
+    """``ValueError`` when ``total`` steps would train nothing; a warning (returned) when they train the actor little.
+
+    A residual run holds its actor at the initial weights (the base controller's command) for its first
+    ``burn_in_steps`` steps, and an off-policy learner takes no gradient step before ``learning_starts``:
+    a budget at or below either ends with the policy it started from. ``budget`` names where ``total`` came from.
+    """
+    idle = {}
+    if residual and int(hp.get("burn_in_steps", 0)):
+        idle["burn_in_steps"] = (int(hp["burn_in_steps"]), "the actor is held at the base controller's command")
+    parameter = algorithm_parameters(cls).get("learning_starts")  # off-policy learners only
+    starts = hp.get("learning_starts", parameter.default if parameter is not None else 0)
+    if isinstance(starts, int) and starts > 0:
+        idle["learning_starts"] = (starts, "no gradient step is taken")
+    if not idle:
+        return None
+    held = max(value for value, _ in idle.values())
+    binding = {key: value for key, value in idle.items() if value[0] >= min(total, held)}
+    what = " and ".join(f"{key}: {value} ({why} for the first {value} steps)" for key, (value, why) in binding.items())
+    if total <= held:
+        raise ValueError(f"{budget} {total} trains nothing with {source}: {what}. Pass --steps above {held}, or "
+                         f"lower {' and '.join(binding)} in your own copy of the block (--hyperparams FILE; "
+                         "docs/configure.md)")
+    if total - held < held:
+        return (f"only the last {total - held} of {total} steps train the actor with {source}: {what}; a larger "
+                f"--steps, or a lower {' / '.join(binding)} in --hyperparams FILE, trains it for longer")
+    return None
+
+
 def whole_number(name: str, value: object, minimum: int = 1, maximum: int | None = None) -> int:
     """``value`` (an int, an integral float or such a string) as an int in [minimum, maximum], else ``ValueError``."""
     try:

@@ -39,6 +39,7 @@ from continuum_gym.agents.cluster import connect
 from continuum_gym.agents.run_inputs import output_directory, seed_number, whole_number
 from continuum_gym.agents.train import (
     ALGOS,
+    check_steps,
     default_base,
     headline_metric,
     load_hyperparams,
@@ -197,8 +198,10 @@ def sweep(env_id: str, algo: str, base: str | None, seeds: Sequence[int], steps:
     """
     validate(env_id, algo, base)
     seeds, steps, cpus_per_trial = check_sweep_arguments(seeds, steps, cpus_per_trial, out)
-    search_spec = load_search(search, algo, env_id) if search else {"method": "grid", "num_samples": 1,
-                                                                     "scheduler": "none", "asha": {}, "space": {}}
+    search_spec: dict[str, Any] = load_search(search, algo, env_id) if search else {
+        "method": "grid", "num_samples": 1, "scheduler": "none", "asha": {}, "space": {}}
+    if not {"burn_in_steps", "learning_starts", "n_timesteps"} & set(search_spec["space"]):  # else per trial
+        check_steps(algo, env_id, base, steps, hyperparams)
     try:
         import ray
         from ray import tune

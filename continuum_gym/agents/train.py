@@ -39,6 +39,7 @@ import yaml
 from continuum_gym.agents.evaluation_callback import history_until, make_eval_callback
 from continuum_gym.agents.run_inputs import (
     SCHEDULE_KEYS,
+    check_budget,
     check_combination,
     check_hyperparams,
     load_hyperparams,
@@ -107,6 +108,18 @@ def validate(env_id: str, algo: str, base: str | None) -> str | None:
     except ValueError as error:
         raise ValueError(f"unknown base {base!r} for {env_id}; valid: {list(spec.baselines)}, a registered "
                          f"controller or none. {error}") from None
+
+
+def check_steps(algo: str, env_id: str, base: str | None, steps: int | None,
+                hyperparams: Path | str | None = None) -> str | None:
+    """``run_inputs.check_budget`` for the block ``train`` would read: ``ValueError`` if ``steps`` (None: the
+    block's ``n_timesteps``) trains nothing, a warning if it trains the actor little, else None."""
+    hp = resolve_hyperparams(algo, env_id, hyperparams)
+    if steps is None and "n_timesteps" not in hp:
+        return None
+    source = f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]"
+    return check_budget(_algo_class(algo), hp, steps if steps is not None else hp["n_timesteps"], base is not None,
+                        source, "--steps" if steps is not None else "n_timesteps")
 
 
 def default_base(env_id: str) -> str | None:
@@ -250,6 +263,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     total = whole_number("steps", steps) if steps is not None else hp["n_timesteps"]
     n = whole_number("n_envs", n_envs) if n_envs is not None else hp.get("n_envs", RUN_DEFAULTS["n_envs"])
     check_combination(algo, hp, n, source)
+    little = check_budget(_algo_class(algo), hp, total, base is not None, source,
+                          "--steps" if steps is not None else "n_timesteps")
     run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
@@ -270,6 +285,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
         venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{source}: env_kwargs: {error}") from None
+    if little:
+        notice(little)
     run_dir.mkdir(parents=True, exist_ok=True)
     with _exclusive(run_dir):
         unit, done = _starting_point(run_dir, resume, total)
@@ -303,8 +320,14 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
             if remaining > 0:
                 from stable_baselines3.common.callbacks import CallbackList
 
-                model.learn(total_timesteps=remaining, callback=CallbackList(callbacks),
-                            reset_num_timesteps=unit is None, tb_log_name="tb", progress_bar=progress)
+                from continuum_gym.agents.progress import ProgressBar, rollout_steps, training_end
+
+                end = training_end(model, total)
+                if end != total:
+                    notice(f"training ends at step {end}: {total} steps rounded up to whole rollouts of "
+                           f"{rollout_steps(model)} steps (n_envs x {'n_steps' if algo == 'ppo' else 'train_freq'})")
+                model.learn(total_timesteps=remaining, reset_num_timesteps=unit is None, tb_log_name="tb",
+                            callback=CallbackList(callbacks + ([ProgressBar(total)] if progress else [])))
                 saver.save()
             save_model_atomic(model, run_dir / "model.zip")
         finally:

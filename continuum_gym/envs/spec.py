@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from continuum_gym.envs.config import EnvConfig
+from continuum_gym.plugins import ENTRY_POINT_GROUP, ENV_VAR
 from continuum_gym.plugins import load_object as load
 from continuum_gym.validation import closest
 
@@ -172,8 +173,18 @@ def get_spec(env_id: str) -> EnvSpec:
             if _names(registered.entry_point, spec.entry_point, spec.goal_entry_point) \
                     or _names(registered.vector_entry_point, spec.vector_entry_point):
                 return spec
-    raise ValueError(f"unknown env id {env_id!r}{closest(env_id, ENV_SPECS)}; valid ids: {sorted(ENV_SPECS)} "
-                     "(or an id registered to their entry points)")
+        raise ValueError(f"env id {env_id!r} is registered to {registered.entry_point!r}, not to the entry point of "
+                         f"one of continuum-gym's environments {sorted(ENV_SPECS)}: register it with "
+                         "entry_point=... of one of them (docs/tutorials/variant.md)")
+    raise ValueError(f"unknown env id {env_id!r}{closest(env_id, ENV_SPECS)}; valid ids: {sorted(ENV_SPECS)}, or an "
+                     f"id registered to their entry points. {REGISTER_HINT}")
+
+
+#: How a user's id becomes known to a process (and to the processes it starts).
+REGISTER_HINT = ("A user's id must be registered at import of an importable module (gymnasium's register() in it), and "
+                 "that module imported: `continuum-gym --import MODULE` on the command line, an entry point in "
+                 f"the group '{ENTRY_POINT_GROUP}' of an installed package, or the environment variable "
+                 f"{ENV_VAR}=MODULE (in Python: import MODULE before gym.make, or gym.make('MODULE:ID'))")
 
 
 def _names(entry: Any, *references: str) -> bool:

@@ -466,7 +466,7 @@ def run(args: argparse.Namespace) -> int:
         meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
         report.append(markdown(env_id, table, results) + model_error_note(env_kwargs) + comparison_notes(env_id, table)
                       + skipped_notes(meta[env_id]["skipped"]))
-        for path in draw(env_id, results, table, policies, out):
+        for path in draw(env_id, results, table, policies, out, args.split):
             print(f"wrote {path}")
     seconds = time.perf_counter() - started
     print("\n".join(report) + f"\nEvaluation wall time: {seconds:.0f} s\n")

@@ -6,6 +6,7 @@ their marks are; the offline optimum, where the table has one, is drawn as a ref
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,7 @@ def _pyplot():
     return plt
 
 
-def draw_distributions(spec: EnvSpec, results: dict, table: dict, path: Path) -> Path:
+def draw_distributions(spec: EnvSpec, results: dict, table: dict, path: Path, split: str = "test") -> Path:
     """Box plots of the headline metric per method (all seeds x non-grid episodes), optimum as a line."""
     plt = _pyplot()
     metric = spec.metric(spec.headline_metric)
@@ -53,23 +54,25 @@ def draw_distributions(spec: EnvSpec, results: dict, table: dict, path: Path) ->
         handles.append(ax.axhline(optimum["mean"], color="tab:purple", linestyle="--",
                                   label=f"offline optimum, mean{where}"))
     ax.legend(handles=handles, fontsize=8, loc="best")
-    ax.set(ylabel=metric.axis_label(), title=f"{spec.short_name}: {metric.label} per episode (held-out test tasks)")
+    ax.set(ylabel=metric.axis_label(), title=f"{spec.short_name}: {metric.label} per episode (held-out {split} tasks)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
-def draw_traces(spec: EnvSpec, results: dict, path: Path, control_dt: float = 0.01) -> Path:
-    """The per-step trace of the paper task of ``spec.trace_task``, first seed of each method."""
+def draw_traces(spec: EnvSpec, results: dict, path: Path, control_dt: float = 0.01) -> Path | None:
+    """The per-step trace of the paper task of ``spec.trace_task``, first seed of each method (None, and no file,
+    when no method ran that task: it is not in the evaluated split)."""
     plt = _pyplot()
     key = f"trace_{spec.trace_value}"
     words, higher = TRACE_LABELS.get(spec.trace_value, (spec.trace_value, True))
+    drawn = {method: tasks[spec.trace_task] for method, tasks in results.items()
+             if tasks.get(spec.trace_task) and tasks[spec.trace_task]["traces"]}
+    if not drawn:  # the trace task is not in this split (the circle is test-only): no empty figure
+        return None
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    for method, tasks in results.items():
-        task = tasks.get(spec.trace_task)
-        if not task or not task["traces"]:
-            continue
+    for method, task in drawn.items():
         trace = task["traces"][0][key]
         time = np.arange(len(trace)) * control_dt
         line, = ax.plot(time, trace, label=method)
@@ -165,7 +168,8 @@ def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path, env_id: str 
         return None
     plt = _pyplot()
     timed = all(elapsed is not None for _, _, elapsed in curves.values())
-    fig, axes = plt.subplots(1, 2 if timed else 1, figsize=(11 if timed else 6.5, 4.4), squeeze=False)
+    # Laid out at the dpi it is saved at (text sizes round to its pixels), with a y label short enough to fit
+    fig, axes = plt.subplots(1, 2 if timed else 1, figsize=(11 if timed else 6.5, 4.4), squeeze=False, dpi=90)
     for method, (steps, values, elapsed) in curves.items():
         mean, low, high = _seed_band(values)
         label = f"{method} ({values.shape[0]} seed{'s' if values.shape[0] > 1 else ''})"
@@ -175,7 +179,8 @@ def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path, env_id: str 
             clock = np.nanmean(elapsed, axis=0)
             axes[0, 1].plot(clock, mean, color=line.get_color(), label=label)
             axes[0, 1].fill_between(clock, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    ylabel = metric_axis(metric, "validation ", "\n")
+    what, direction = metric_axis(metric, "validation ", "\n").split("\n")
+    ylabel = textwrap.fill(what, 34) + "\n" + direction  # a long metric name on two lines: never cut off
     axes[0, 0].set(xlabel="environment steps (summed over the vector env)", ylabel=ylabel,
                    title="against environment steps", xlim=(0, None))
     if timed:
@@ -227,11 +232,11 @@ def draw_performance_profiles(spec: EnvSpec, results: dict, path: Path, reps: in
     return path
 
 
-def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path) -> list:
-    """Every figure of one env into ``out``; returns the paths written."""
+def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path, split: str = "test") -> list:
+    """Every figure of one env into ``out`` that has something to show; returns the paths written."""
     spec = get_spec(env_id)
     short = env_id.split("/")[-1].rsplit("-v", 1)[0]  # a registered variant's figures carry its own name
-    paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png"),
+    paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png", split),
              draw_traces(spec, results, out / f"{short}_{spec.trace_task}_trace.png"),
              draw_coverage_maps(spec, results, table, out / f"{short}_coverage_maps.png"),
              draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png", env_id),

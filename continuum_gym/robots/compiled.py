@@ -24,6 +24,10 @@ on any CPU of the same architecture. The kernels are scalar code, so the generic
 no speed against a native one, and computes the same bits.
 
 ``CONTINUUM_GYM_PRECOMPILED=0`` ignores the set (measuring a JIT cold start, debugging a kernel).
+
+A compile is never silent: when a kernel (the package's or a user's plug-in) is compiled because neither
+place has it, one line on stderr names it (not the kernels it compiles along the way) and says whether it is
+cached afterwards; a kernel loaded from a cache says nothing. ``CONTINUUM_GYM_COMPILE_MESSAGES=0`` silences it.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import json
 import os
 import platform
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -42,7 +47,8 @@ from typing import Any
 import llvmlite
 import numba
 import numpy as np
-from numba.core.caching import FunctionCache, IndexDataCacheFile  # numba >= 0.49; tested with 0.68
+from numba.core import event as numba_event
+from numba.core.caching import FunctionCache, IndexDataCacheFile, NullCache  # numba >= 0.49; tested with 0.68
 
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_PRECOMPILED_DIR = PACKAGE_ROOT / "_precompiled"
@@ -209,6 +215,59 @@ class PrecompiledFirstCache(FunctionCache):
         (self._set_dir / layer / self._module_dir).mkdir(parents=True, exist_ok=True)
         self._layer(layer).save(self._index_key(sig, data.codegen), self._impl.reduce(data))
         return None
+
+
+def compile_messages_enabled() -> bool:
+    """False when ``CONTINUUM_GYM_COMPILE_MESSAGES=0``: compiles are not announced on stderr."""
+    value = os.environ.get("CONTINUUM_GYM_COMPILE_MESSAGES", "1").strip().lower()
+    return value not in ("0", "false", "no")
+
+
+class CompileAnnouncer(numba_event.Listener):
+    """Says on stderr which kernel numba compiles, once per compile that a user waits for.
+
+    numba fires ``numba:compile`` only when it compiles (after both caches missed); the kernels compiled
+    inside that compile (its callees) are part of it and not named. numba's own uncached helpers (typed
+    lists), which compile in every process in a fraction of a second, are not named either.
+    """
+
+    def __init__(self) -> None:
+        self._local = threading.local()
+        self.count = 0  #: compiles named so far in this process (silenced or not)
+
+    def on_start(self, event: numba_event.Event) -> None:
+        stack = self._local.__dict__.setdefault("stack", [])
+        dispatcher = (event.data or {}).get("dispatcher")
+        py_func = getattr(dispatcher, "py_func", None)  # None for numba's lifted loops: part of their function
+        cached = not isinstance(getattr(dispatcher, "_cache", None), NullCache)
+        module = getattr(py_func, "__module__", None) or ""
+        named = py_func is not None and (cached or not module.startswith("numba")) and not any(stack)
+        stack.append(named)
+        self.count += named
+        if named and compile_messages_enabled():
+            where = ("once: cached on disk afterwards; `continuum-gym precompile` compiles ahead of time" if cached
+                     else "not cached: it compiles again in every process; declare it @njit(cache=True)")
+            print(f"continuum-gym: compiling {module}.{getattr(py_func, '__qualname__', '?')} with numba "
+                  f"(seconds to minutes, {where})", file=sys.stderr, flush=True)
+
+    def on_end(self, event: numba_event.Event) -> None:
+        stack = self._local.__dict__.get("stack")
+        if stack:
+            stack.pop()
+
+
+def _announcer() -> Any:
+    """The process's one announcer, registered with numba once (also if this module is imported again)."""
+    for listener in getattr(numba_event, "_registered", {}).get("numba:compile", []):
+        if type(listener).__name__ == CompileAnnouncer.__name__:
+            return listener
+    listener = CompileAnnouncer()
+    numba_event.register("numba:compile", listener)
+    return listener
+
+
+#: Counts and announces the compiles of this process (``ANNOUNCER.count``).
+ANNOUNCER = _announcer()
 
 
 def kernel(func: Callable | None = None, *, borrows: bool = False, **options: Any) -> Any:

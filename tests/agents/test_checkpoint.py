@@ -119,6 +119,29 @@ def test_a_run_stopped_before_its_first_checkpoint_starts_again(tmp_path, monkey
         assert len((run_dir / "command.txt").read_text().splitlines()) == 2
 
 
+def test_the_progress_bar_of_a_resumed_run_counts_from_its_checkpoint_to_the_step_it_ends_at(tmp_path, monkeypatch,
+                                                                                              capsys):
+    """Resumed at step 256 towards 1000 steps: PPO trains whole rollouts of 128, so the run ends at 1024. The bar
+    starts at 256/1024 and ends at 1024/1024, never past its total (SB3's own read 768/744 here)."""
+    import re
+
+    from stable_baselines3 import PPO
+
+    hp = _hyperparams(tmp_path, n_timesteps=1000)
+    with monkeypatch.context() as patch:
+        _kill_at_write(patch, 3)
+        with pytest.raises(Killed):
+            _run(tmp_path, hp)
+    capsys.readouterr()
+    run_dir = train(VIEW, "ppo", seed=0, out=tmp_path / "runs", hyperparams=hp, progress=True, resume=True)
+    err = capsys.readouterr().err
+    shown = [(int(n), int(total)) for n, total in re.findall(r"(\d+)/(\d+) steps", err.replace(",", ""))]
+    assert shown and shown[0] == (256, 1024) and shown[-1] == (1024, 1024), shown
+    assert all(n <= total for n, total in shown)
+    assert "ends at step 1024" in err and "whole rollouts of 128" in err
+    assert PPO.load(run_dir / "model.zip", device="cpu").num_timesteps == 1024
+
+
 def test_sigkill_while_publishing_a_unit_keeps_the_previous_one(tmp_path, capsys):
     hp = _hyperparams(tmp_path)
     script = (
@@ -330,6 +353,54 @@ def test_bad_input_exits_2_naming_the_parameter_and_writes_nothing(tmp_path, cap
     for needle in needles:
         assert needle in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_a_budget_below_the_packaged_burn_in_fails_naming_steps_the_value_and_the_fix(algo, tmp_path, capsys):
+    """The packaged off-policy blocks hold the residual's actor for 20000 steps: 10000 would train nothing."""
+    out = tmp_path / "out"
+    assert main(["train", "--env", VIEW, "--algo", algo, "--steps", "10000", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("continuum-gym train: ") and len(err.splitlines()) == 1
+    for needle in ("--steps 10000", "trains nothing", "burn_in_steps: 20000", f"{algo}.yml", "above 20000",
+                   "--hyperparams"):
+        assert needle in err, needle
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("block, steps, needles", [
+    ({"learning_starts": 5000, "burn_in_steps": 0}, 5000, ["learning_starts: 5000", "above 5000"]),
+    ({"learning_starts": 100, "burn_in_steps": 300}, 200, ["burn_in_steps: 300", "above 300"]),
+])
+def test_an_off_policy_budget_at_or_below_learning_starts_or_burn_in_fails(tmp_path, capsys, block, steps, needles):
+    hp = tmp_path / "sac.yml"
+    hp.write_text(yaml.safe_dump({VIEW: {"n_envs": 2, **block}}))
+    out = tmp_path / "out"
+    assert main(["train", "--env", VIEW, "--algo", "sac", "--steps", str(steps), "--hyperparams", str(hp),
+                 "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    for needle in (f"--steps {steps}", "trains nothing", *needles):
+        assert needle in err, needle
+    assert not out.exists()
+
+
+def test_a_budget_that_trains_the_actor_for_less_than_its_burn_in_warns_and_trains(tmp_path, capsys):
+    from stable_baselines3 import SAC
+
+    block = {"policy": "MlpPolicy", "n_envs": 2, "buffer_size": 1000, "batch_size": 32, "learning_starts": 64,
+             "train_freq": 8, "gradient_steps": 1, "n_timesteps": 256, "checkpoint_freq": 10**6, "eval_freq": 10**6,
+             "n_eval_episodes": 1, "burn_in_steps": 192, "policy_kwargs": {"net_arch": [16]},
+             "env_kwargs": {"task": "static", "max_episode_steps": 40}}
+    hp = tmp_path / "sac.yml"
+    hp.write_text(yaml.safe_dump({VIEW: block}))
+    run_dir = train(VIEW, "sac", seed=0, out=tmp_path / "runs", hyperparams=hp, progress=False)
+    err = capsys.readouterr().err
+    assert "only the last 64 of 256 steps train the actor" in err and "burn_in_steps: 192" in err
+    assert SAC.load(run_dir / "model.zip", device="cpu").num_timesteps == 256
+    # A pure-RL run has no burn-in: only learning_starts counts, and 256 steps are plenty past 64.
+    capsys.readouterr()
+    train(VIEW, "sac", base=None, seed=0, out=tmp_path / "runs", hyperparams=hp, progress=False)
+    assert "train the actor" not in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("text, needle", [

@@ -47,6 +47,13 @@ def test_unknown_search_key_fails_before_anything_starts(tmp_path, capsys):
         load_search(tmp_path / "b3.yml", "ppo", VIEW)
 
 
+def test_a_budget_that_trains_nothing_fails_before_any_trial_starts(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["sweep", "--env", VIEW, "--algo", "sac", "--steps", "10000", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--steps 10000 trains nothing" in err and "burn_in_steps: 20000" in err and not out.exists()
+
+
 def test_missing_ray_says_how_to_install(tmp_path, files, monkeypatch, capsys):
     hp, search = files
     monkeypatch.setitem(sys.modules, "ray", None)

@@ -237,3 +237,53 @@ def test_shipped_cache_has_the_documented_keys():
     assert cache["coverage"]["optimum_percent"] >= cache["coverage"]["bounded_least_squares_percent"]
     with pytest.raises(KeyError):
         optimum.cache_value(cache, "coverage.nope")
+
+
+# ---------------------------------------------------------------------- a registered variant's ceiling
+VARIANT_ID = "MyTest/Occlusion4Seg-v0"
+
+
+@pytest.fixture
+def four_segment_variant(monkeypatch, tmp_path):
+    """A registered 4-segment variant whose optimum computation is stubbed (the real one takes minutes): what the
+    command does with the result is under test, not the optimum."""
+    import gymnasium as gym
+
+    from continuum_gym.evaluation import references
+
+    gym.register(id=VARIANT_ID, entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceEnv",
+                 kwargs={"robot": MultiBackboneRobot(lengths=(0.018,) * 4)})
+    monkeypatch.setenv("CONTINUUM_GYM_CACHE", str(tmp_path / "cache"))
+    computed = []
+
+    def stub(spec, env_kwargs, episodes, grid, split, progress, workers):
+        computed.append(env_kwargs)
+        return {"hold_test": {"task_ids": list(range(episodes)), "optimum_voi": [0.05 + 0.01 * k for k in range(episodes)],
+                              "optimum_mean_voi": 0.05 + 0.005 * (episodes - 1)}}
+
+    monkeypatch.setattr(references, "_compute", stub)
+    yield computed
+    gym.registry.pop(VARIANT_ID)
+
+
+def test_optimum_out_writes_a_variants_figure_and_says_so(four_segment_variant, tmp_path, capsys):
+    out = tmp_path / "figures"
+    assert _cli(["--env", VARIANT_ID, "--env-hold-tasks", "3", "--out", str(out), "--no-progress"]) == 0
+    assert four_segment_variant and len(four_segment_variant[0]["robot"].lengths) == 4
+    figure = out / "Occlusion4Seg_optimum_hold_test.png"
+    assert figure.stat().st_size > 10_000
+    assert f"wrote {figure}" in capsys.readouterr().out
+
+
+def test_optimum_of_a_variant_without_a_known_optimum_says_why_and_fails(monkeypatch, tmp_path, capsys):
+    import dataclasses
+
+    from continuum_gym.envs.spec import ENV_SPECS
+
+    spec = dataclasses.replace(ENV_SPECS[OCCLUSION_ID], env_id="MyTest/NoOptimum-v0", physics=(), optimum="")
+    monkeypatch.setitem(ENV_SPECS, spec.env_id, spec)
+    out, path = tmp_path / "figures", tmp_path / "optimum.json"
+    assert _cli(["--env", spec.env_id, "--out", str(out), "--json", str(path), "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "no known offline optimum" in err and "nothing written" in err and spec.env_id in err
+    assert not out.exists() and not path.exists()

@@ -100,6 +100,47 @@ def test_the_set_still_serves_a_kernel_whose_file_gained_lines_and_docstrings(to
     assert run_child(toy_tree, "read") == {"bits": written["bits"], "hits": 1, "misses": 0}
 
 
+def test_a_compile_names_its_kernel_once_and_a_cache_hit_says_nothing(toy_tree):
+    """A compile that takes seconds to minutes says which kernel compiles and that it is cached afterwards:
+    one line for the kernel called (not for the helpers it compiles), none when it comes from a cache."""
+    environ = {k: v for k, v in os.environ.items() if k != "CONTINUUM_GYM_COMPILE_MESSAGES"}
+    environ.update(NUMBA_CACHE_DIR=str(toy_tree / "numba-cache"), CONTINUUM_GYM_PRECOMPILED_DIR=str(toy_tree / "set"))
+
+    def child(**env):
+        out = subprocess.run([sys.executable, "-c", CHILD, str(toy_tree / "src"), "read"], env={**environ, **env},
+                             capture_output=True, text=True, check=True)
+        return json.loads(out.stdout.strip().splitlines()[-1]), [line for line in out.stderr.splitlines()
+                                                                 if "compiling" in line]
+
+    stats, said = child()
+    assert stats["misses"] == 1 and len(said) == 1, said
+    assert said[0].startswith("continuum-gym: compiling toy_kernels.toy ") and "cached on disk afterwards" in said[0]
+    stats, said = child()
+    assert stats["hits"] == 1 and said == []  # from numba's cache: nothing compiles, nothing is said
+    for entry in (toy_tree / "numba-cache").rglob("*.nb*"):
+        entry.unlink()
+    stats, said = child(CONTINUUM_GYM_COMPILE_MESSAGES="0")
+    assert stats["misses"] == 1 and said == []  # compiled again, silenced
+
+
+def test_a_users_uncached_kernel_is_named_with_the_advice_to_cache_it(capsys, monkeypatch):
+    import numba
+
+    monkeypatch.delenv("CONTINUUM_GYM_COMPILE_MESSAGES", raising=False)
+
+    @numba.njit
+    def users_kernel(x):
+        return 2.0 * x
+
+    before = compiled.ANNOUNCER.count
+    assert users_kernel(1.5) == 3.0
+    said = [line for line in capsys.readouterr().err.splitlines() if "compiling" in line]
+    assert len(said) == 1 and ".users_kernel with numba" in said[0] and "@njit(cache=True)" in said[0]
+    assert compiled.ANNOUNCER.count == before + 1
+    users_kernel(2.5)  # compiled already: nothing more
+    assert "compiling" not in capsys.readouterr().err and compiled.ANNOUNCER.count == before + 1
+
+
 def test_set_built_from_other_sources_is_ignored(toy_tree):
     run_child(toy_tree, "write")
     stale = run_child(toy_tree, "stale")
@@ -230,3 +271,74 @@ def test_the_workers_progress_is_one_bar_without_an_estimate(terminal, capsys, m
         assert "precompile: 100%" not in err and "5/6 steps" in err  # the steps of every worker, in one bar
     else:
         assert "steps" not in err  # a bar redrawn in place would garble a log
+
+
+VARIANT_MODULE = '''
+"""A user's variant: a 2-segment robot and its own controller, registered at import."""
+import numpy as np
+from gymnasium.envs.registration import register, registry
+from numba import njit
+
+from continuum_gym.registry import register_controller, register_robot
+from continuum_gym.robots import MultiBackboneRobot
+from continuum_gym.robots.mbcr_kernels import make_workspace, tip_kernel
+
+ENV_ID = "MyTest/PrecompiledTwoSeg-v0"
+BASE = "ContinuumGym/OcclusionAvoidance-v0"
+
+
+@njit(cache=True)
+def mytest_tracker(q, gamma, p_des, R_des, v_des, dt, robot, cone, params, out):
+    ws = make_workspace(robot.lengths.shape[0])
+    p, R, J = np.empty(3), np.empty((3, 3)), np.empty((6, q.shape[0]))
+    tip_kernel(q, robot, ws, p, R, J)
+    out[: q.shape[0]] = params[0] * (J[:3].T @ (p_des - p))
+    out[q.shape[0]] = 0.0
+
+
+register_robot("mytest-2seg", MultiBackboneRobot(lengths=(0.030, 0.025)), replace=True)
+register_controller("mytest_tracker", mytest_tracker, env=BASE, params=[20.0], replace=True)
+if ENV_ID not in registry:
+    register(id=ENV_ID, entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceEnv",
+             vector_entry_point="continuum_gym.envs.occlusion:OcclusionAvoidanceVectorEnv",
+             kwargs={"robot": "mytest-2seg", "base_controller": "mytest_tracker"})
+'''
+
+FIRST_MAKE = '''
+import numpy as np, gymnasium as gym
+import mytest_variant
+env = gym.make(mytest_variant.ENV_ID)
+env.reset(seed=0)
+env.step(np.zeros(env.action_space.shape, dtype=np.float32))
+print(env.action_space.shape)
+'''
+
+
+def test_precompile_env_compiles_what_a_variants_first_make_runs(tmp_path):
+    """`continuum-gym precompile --import MODULE --env ID` compiles the variant's kernels (its own controller, its
+    robot's step): the first gym.make(ID) of a new process afterwards compiles nothing and says nothing."""
+    (tmp_path / "mytest_variant.py").write_text(VARIANT_MODULE)
+    environ = {k: v for k, v in os.environ.items() if k not in ("CONTINUUM_GYM_COMPILE_MESSAGES",
+                                                                  "CONTINUUM_GYM_PLUGINS")}
+    precompiled = subprocess.run([sys.executable, "-m", "continuum_gym.cli", "precompile", "--import", "mytest_variant",
+                                  "--env", "MyTest/PrecompiledTwoSeg-v0"], cwd=tmp_path, env=environ,
+                                 capture_output=True, text=True, timeout=1800)
+    assert precompiled.returncode == 0, precompiled.stderr[-3000:]
+    assert "continuum-gym: compiling mytest_variant.mytest_tracker " in precompiled.stderr  # compiled here, once
+    assert "MyTest/PrecompiledTwoSeg-v0" in precompiled.stdout
+    environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(tmp_path), environ.get("PYTHONPATH")) if p)
+    first = subprocess.run([sys.executable, "-c", FIRST_MAKE], cwd=tmp_path, env=environ, capture_output=True,
+                           text=True, timeout=1800)
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert first.stdout.strip() == "(6,)"  # the 2-segment variant (2 x 2 bends + insertion + endoscope roll)
+    assert "compiling" not in first.stderr, first.stderr
+
+
+@pytest.mark.parametrize("flags, needle", [(["--check"], "--check"), (["--out", "x"], "--out"),
+                                           (["--portable"], "--portable")])
+def test_precompile_env_refuses_the_flags_of_the_packaged_set(flags, needle, capsys):
+    from continuum_gym.cli import main
+
+    assert main(["precompile", "--env", "ContinuumGym/ViewTracking-v0", *flags]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "--env" in err

@@ -51,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", default="all", help="coverage, hold, circle or all (default: the env's tasks)")
     parser.add_argument("--grid", type=int, default=COVERAGE_GRID, help="coverage grid points per axis (default 21)")
     parser.add_argument("--json", help="write the results as nested JSON to this path")
-    parser.add_argument("--out", help="directory for the figures (PNG)")
+    parser.add_argument("--out", help="directory for the figures (PNG; a registered variant's are named after its id)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--write-cache", action="store_true",
                         help=f"merge the results into the shipped cache {CACHE_PATH.name}")
@@ -154,9 +154,16 @@ def run_variant(args: argparse.Namespace) -> int:
         if args.write_cache:
             raise ValueError("--write-cache updates the shipped cache of the paper's environments; a variant's "
                              "optimum is kept in the user cache ($CONTINUUM_GYM_CACHE) by itself")
+        if args.out and Path(args.out).exists() and not Path(args.out).is_dir():
+            raise ValueError(f"--out must be a directory for the figures; {args.out!r} is an existing file")
     except ValueError as error:
         print(f"continuum-gym optimum: error: {error}", file=sys.stderr)
         return 2
+    if not spec.physics or not spec.optimum:
+        print(f"continuum-gym optimum: {args.env} has no known offline optimum: its environment "
+              f"({spec.short_name}) names no optimum to compute (EnvSpec.optimum and .physics are empty); nothing "
+              "computed, nothing written", file=sys.stderr)
+        return 1
     started = time.perf_counter()
     results = load_references(spec, registered_kwargs(args.env), episodes=episodes, grid=grid, split="test",
                               progress=not args.no_progress, workers=workers) or {}
@@ -179,7 +186,34 @@ def run_variant(args: argparse.Namespace) -> int:
     if args.json:
         write_json_atomic(args.json, results)
         print(f"wrote {args.json}")
+    if args.out:
+        written = variant_figures(args.env, spec, results, Path(args.out))
+        for path in written:
+            print(f"wrote {path}")
+        if not written:
+            print(f"continuum-gym optimum: the optimum of {args.env} has nothing to draw (it holds "
+                  f"{sorted(k for k in results if k != 'meta')}); no figure written to {args.out}", file=sys.stderr)
+            return 1
     return 0
+
+
+def variant_figures(env_id: str, spec: Any, results: dict, out: Path) -> list[Path]:
+    """The figures of a variant's optimum (those of its env's table rows), named after its id; the paths written."""
+    from continuum_gym.evaluation.optimum.figures import draw_coverage_maps, draw_hold_test
+
+    keys = {row.cache_key for row in spec.references} & set(results)
+    short = env_id.split("/")[-1].rsplit("-v", 1)[0]
+    written = []
+    if keys:
+        out.mkdir(parents=True, exist_ok=True)
+    if "coverage" in keys:
+        written.append(draw_coverage_maps(results["coverage"], out / f"{short}_optimum_coverage_maps.png"))
+    if "hold_test" in keys:
+        hold = results["hold_test"]
+        written.append(draw_hold_test(hold, results.get("hold_test_rate_bound") if "hold_test_rate_bound" in keys
+                                      else None, out / f"{short}_optimum_hold_test.png",
+                                      f"{env_id}: offline optimum of {len(hold['optimum_voi'])} held-out hold tasks"))
+    return written
 
 
 def summary_table(results: dict) -> str:

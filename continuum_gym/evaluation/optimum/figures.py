@@ -92,3 +92,32 @@ def draw_circle(circle: dict, path: Path | str) -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def draw_hold_test(hold_test: dict, rate_bound: dict | None, path: Path | str, title: str = "") -> Path:
+    """Per held-out hold task: the offline optimum's VOI and, where computed, the rate-limited bound and the
+    planned trajectory's episode-mean VOI (``hold_test`` and ``hold_test_rate_bound`` of an optimum cache)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    optimum = np.asarray(hold_test["optimum_voi"], dtype=float)
+    order = np.argsort(np.nan_to_num(optimum, nan=np.inf))
+    x = np.arange(len(order))
+    fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
+    ax.bar(x, optimum[order], color="tab:green", alpha=0.7,
+           label=f"offline optimum (mean {np.nanmean(optimum):.3f})")
+    if rate_bound is not None:
+        for key, marker, color, words in (("mean_voi_bound", "v", "tab:red", "rate-limited bound, episode mean"),
+                                          ("mean_voi_plan", "o", "tab:blue", "planned trajectory, episode mean")):
+            values = np.asarray(rate_bound[key], dtype=float)[order]
+            ax.plot(x, values, marker, mfc="none", color=color, label=f"{words} (mean {np.mean(values):.3f})")
+    ax.set_xticks(x, [str(hold_test["task_ids"][k]) for k in order], fontsize=7)
+    ax.set(xlabel="held-out hold task id (sorted by the optimum)", ylabel="VOI, lower is better",
+           title=title or f"Offline optimum of {len(x)} held-out hold tasks")
+    ax.legend(fontsize=8)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
