@@ -133,7 +133,10 @@ def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict
     from continuum_gym.evaluation.benchmark import PROTOCOL_KEYS
 
     env_kwargs = dict(env_kwargs or {})
-    spec.config_class.from_kwargs(**env_kwargs)  # named errors before anything runs
+    try:  # named errors before anything runs
+        spec.config_class.from_kwargs(**env_kwargs)
+    except ValueError as error:
+        raise type(error)(f"env_kwargs (--env-kwargs): {error}") from None
     ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
     policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in spec.policy_keys}
     return env_kwargs, policy, ignored
