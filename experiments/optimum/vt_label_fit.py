@@ -51,8 +51,9 @@ def fit_mlp(x: np.ndarray, y: np.ndarray, steps: int, seed: int, batch: int | No
 
 
 def score(q: np.ndarray, targets: np.ndarray) -> dict:
+    from residual_reach import hold_effort
+
     from continuum_gym.evaluation.optimum.view import overlap_of_configuration
-    from continuum_gym.evaluation.residual_reach import hold_effort
     from continuum_gym.geometry.frustum import Frustum
     from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 

@@ -34,12 +34,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from residual_reach import HOLD_MARGIN, PENALTY, HoldEffort, holdable_optimum
 from scipy.optimize import minimize
 
 from continuum_gym.baselines.registry import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_INSERTION, COVERAGE_THRESHOLD
 from continuum_gym.evaluation.optimum.view import overlap_of_configuration, view_tracking_optimum
-from continuum_gym.evaluation.residual_reach import HOLD_MARGIN, PENALTY, HoldEffort, holdable_optimum
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import DaVinciEndoscope
 

@@ -53,6 +53,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from residual_reach import HOLD_MARGIN, PENALTY
 from scipy.optimize import minimize
 from vt_smooth_labels import (
     ANGLES,
@@ -70,7 +71,6 @@ from vt_smooth_labels import (
 
 from continuum_gym.baselines.scenarios import COVERAGE_INSERTION, COVERAGE_THRESHOLD
 from continuum_gym.evaluation.optimum.view import view_tracking_optimum
-from continuum_gym.evaluation.residual_reach import HOLD_MARGIN, PENALTY
 
 
 def grid_axes(args) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,15 +1,19 @@
-"""Hold effort and the holdable optimum: what a joint-rate residual of a given scale can reach and hold."""
+"""Hold effort and the holdable optimum: what a joint-rate residual of a given scale can reach and hold.
+
+Not part of the package's suite (``make test`` runs ``tests/``): ``pytest experiments/optimum`` from the repository's
+root (pytest puts this directory on the path, so ``residual_reach`` imports as the campaign scripts import it).
+"""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from residual_reach import hold_effort, holdable_optimum
 
 from continuum_gym.baselines.scenarios import coverage_grid
 from continuum_gym.envs.view_tracking import ACTION_SCALE, ViewTrackingCore
 from continuum_gym.evaluation.optimum import view_tracking_optimum
-from continuum_gym.evaluation.residual_reach import hold_effort, holdable_optimum
 
 GRID = coverage_grid(21)
 
