@@ -227,7 +227,7 @@ and can differ in the last digit from the README's table.
 
 **Training cost.** Env steps per run are the runs' own counts (PPO rounds up to whole rollouts).
 `continuum-gym train` does not record time, so the wall-clock per run and the learning curves against
-wall-clock are derived from the Ray Tune trial of each run (`scripts/collect_wall_clock.py` wrote
+wall-clock are derived from the Ray Tune trial of each run (`experiments/reference_runs/collect_wall_clock.py` wrote
 `wall_clock.csv` beside each run's `evaluations.npz`): the running sum of Tune's `time_this_iter_s`
 over the trial's reports, i.e. the trial process's wall-clock including start-up, the 16-task validation
 evaluations and checkpoints; a trial killed and resumed counts both sessions, not the work lost between

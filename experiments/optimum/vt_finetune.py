@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def package(args: argparse.Namespace) -> None:
-    """The fine-tuned run as a run directory ``scripts/ship_policies.py`` can ship: the source run's files,
+    """The fine-tuned run as a run directory ``experiments/ship_policies.py`` can ship: the source run's files,
     ``config.yml`` with the total steps and a ``finetune`` block, ``command.txt`` with both commands. The source's
     learning curve (``evaluations.npz``) does not cover the fine-tuning: it is kept as ``evaluations_source.npz``."""
     config = yaml.safe_load((args.run / "config.yml").read_text())

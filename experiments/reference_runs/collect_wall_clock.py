@@ -1,6 +1,6 @@
 """Write each reference run's wall-clock learning curve (``wall_clock.csv``) from its Ray Tune trial.
 
-    python scripts/collect_wall_clock.py [--campaign ~/campaigns/reference] [--into reference-runs]
+    python experiments/reference_runs/collect_wall_clock.py [--campaign ~/campaigns/reference] [--into reference-runs]
 
 ``continuum-gym train`` records the validation curve against env steps (``evaluations.npz``) but not
 the time; the sweep's Tune trial does: one row of ``progress.csv`` per validation evaluation, with
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FILE = "wall_clock.csv"
 
 

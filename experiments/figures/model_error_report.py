@@ -5,7 +5,7 @@ levels none, mild and severe, and writes the results table of ``docs/model-error
 ``results`` markers: mean [95 % CI] of the tip / target-point error, VOI, OR and coverage per method and
 level) and ``docs/img/model_error_headline.png`` (each method's headline metric against the error level).
 
-    python scripts/model_error_report.py /tmp/me   # the directory holding eval_none.json, eval_mild.json, ...
+    python experiments/figures/model_error_report.py /tmp/me   # the directory holding eval_none.json, eval_mild.json, ...
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 LEVELS = ("none", "mild", "severe")
 REFERENCES = ("offline_optimum", "bounded_least_squares")
-DOCS = Path(__file__).resolve().parents[1] / "docs"
+DOCS = Path(__file__).resolve().parents[2] / "docs"
 COLUMNS = {
     "ContinuumGym/OcclusionAvoidance-v0": (("mean_tip_error_m", "tip error (mm)", 1e3), ("mean_voi", "VOI", 1.0),
                                            ("tip_in_view_fraction", "tip in view", 1.0)),
@@ -38,7 +38,7 @@ def main(directory: str) -> int:
     from continuum_gym.envs.spec import get_spec
 
     data = {level: json.loads((Path(directory) / f"eval_{level}.json").read_text()) for level in LEVELS}
-    lines = ["<!-- written by scripts/model_error_report.py from continuum-gym evaluate --model-error "
+    lines = ["<!-- written by experiments/figures/model_error_report.py from continuum-gym evaluate --model-error "
              "none|mild|severe (test split, 32 episodes per task set, 21 x 21 coverage grid) -->", ""]
     for env_id, columns in COLUMNS.items():
         spec = get_spec(env_id)

@@ -1,6 +1,6 @@
 """Copy the finished runs of the reference-results campaign into the repository (``reference-runs/``).
 
-    python scripts/collect_reference_runs.py [--campaign ~/campaigns/reference] [--into reference-runs]
+    python experiments/reference_runs/collect_reference_runs.py [--campaign ~/campaigns/reference] [--into reference-runs]
 
 A run is finished when ``continuum-gym train`` has written its final ``model.zip`` beside its
 ``config.yml`` (checkpoints live in ``checkpoints/`` until then). Only what evaluation and
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FILES = ("model.zip", "config.yml", "args.yml", "command.txt", "evaluations.npz")
 
 

@@ -1,6 +1,6 @@
 """Copy trained runs into the package as shipped policies (model, config, learning curve, command).
 
-    python scripts/ship_policies.py RUN_DIR [RUN_DIR ...] [--dest continuum_gym/agents/policies]
+    python experiments/ship_policies.py RUN_DIR [RUN_DIR ...] [--dest continuum_gym/agents/policies]
 
 A run that was stopped before its end ships its newest verified checkpoint
 (``checkpoints/step_<n>/model.zip``); the step count it reached is recorded in ``shipped.yml`` beside it.

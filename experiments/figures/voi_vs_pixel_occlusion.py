@@ -1,6 +1,6 @@
 """VOI vs pixel occlusion: the paper's geometric index against the fraction of the endoscope image covered.
 
-    python scripts/voi_vs_pixel_occlusion.py [--n 300] [--out DIR] [--resolution 128] [--seed 0]
+    python experiments/figures/voi_vs_pixel_occlusion.py [--n 300] [--out DIR] [--resolution 128] [--seed 0]
 
 Draws ``n`` hold-task starts (``sample_hold_starts``) spread over VOI targets 0.05..0.65 (at gamma = 0),
 evaluates each at gamma = 0 and at a random gamma, and compares the VOI (eq 27) with the pixel occlusion
