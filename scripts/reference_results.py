@@ -202,7 +202,7 @@ def page(data: dict) -> str:
 Every learned run of the reference campaign (issue 35), evaluated once on the **test split**:
 residual PPO, SAC and TD3 on each env's headline baseline (5 seeds each) and pure-RL PPO and SAC
 (3 seeds each), beside the analytic baselines, the packaged bases (ViewTracking's `distilled_optimum`, a controller
-distilled from the offline optimum: [optimum experiments](optimum-experiments.md#campaign-12-2026-12-07)) and the
+distilled from the offline optimum: [the lab notebook](../experiments/notebook.md#campaign-12-2026-12-07)) and the
 offline optimum. Hyperparameters were chosen on
 the validation split only (`continuum_gym/agents/hyperparams/*.yml`, each choice commented with its
 measurement); budgets and protocol: [benchmark protocol](protocol.md). Regenerate this page (tables,

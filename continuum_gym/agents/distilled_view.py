@@ -2,7 +2,7 @@
 that steers the joints to its configuration.
 
 Why: the learned residuals on the dimension-reduced IK settle on many targets in another configuration than the
-best one (docs/optimum-experiments.md, Campaigns 6-11); the best configuration is a function of the target once
+best one (experiments/notebook.md, Campaigns 6-11); the best configuration is a function of the target once
 its labels are made smooth by continuation (Campaign 11). This base gives the residual that configuration.
 
 The network (``distilled_view.npz``: two tanh layers of 128) maps the da Vinci configuration the target comes

@@ -1,4 +1,4 @@
-"""Resumable training queue of the issue 38 campaign (docs/optimum-experiments.md).
+"""Resumable training queue of the issue 38 campaign (experiments/notebook.md).
 
 Trains the runs of a queue one at a time, each as ``continuum-gym train ... --resume`` under ``nice -n 15``
 with ``OMP_NUM_THREADS=1`` (one core; the trainer sets torch to one thread itself):
@@ -15,7 +15,7 @@ The code trained is a frozen copy of the package (``--src``, used through ``PYTH
 the work tree during a campaign do not reach the runs: ``git archive <commit> | tar -x -C <root>/src``.
 The hyperparameter files are ``experiments/optimum/<tag>.yml``.
 
-    nohup python experiments/optimum/run_queue.py occ_s2:0-4 vt_s3_lin6m:0-4 > ~/campaigns/optimum/logs/queue.log 2>&1 &
+    nohup python experiments/optimum/run_queue.py occ_ep10:0-2 vt_mix_s3_lin20m:0-2 > ~/campaigns/optimum/logs/queue.log 2>&1 &
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ def train_one(root: Path, src: Path, tag: str, seed: int, imports: tuple[str, ..
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("items", nargs="+", help="tag:seeds, e.g. occ_s2:0-4")
+    parser.add_argument("items", nargs="+", help="tag:seeds, e.g. occ_ep10:0-2")
     parser.add_argument("--root", type=Path, default=ROOT, help=f"campaign directory (default {ROOT})")
     parser.add_argument("--src", type=Path, default=None, help="frozen package copy (default <root>/src)")
     parser.add_argument("--import", dest="imports", action="append", default=[], metavar="MODULE",

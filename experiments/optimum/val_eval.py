@@ -1,4 +1,4 @@
-"""Validation-split measurements of the issue 38 campaign (docs/optimum-experiments.md, "Validation measurement").
+"""Validation-split measurements of the issue 38 campaign (experiments/notebook.md, "Validation measurement").
 
 Scores trained runs (``RUN_DIR`` with ``config.yml`` + ``model.zip``), single checkpoints
 (``RUN_DIR/checkpoints/step_<n>/model.zip``, with the run's ``config.yml``) or the analytic base
@@ -20,11 +20,11 @@ deterministic policy, in the env built with the policy keywords of its config, a
 Each measurement appends one JSON line to ``<root>/results/val_<env>.jsonl`` and saves the per-task values to
 ``<root>/results/arrays/<tag>_<run>[_step<n>].npz``.
 
-    python experiments/optimum/val_eval.py --tag occ_s2 ~/campaigns/optimum/runs/occ_s2/*seed*
+    python experiments/optimum/val_eval.py --tag occ_ep10 ~/campaigns/optimum/runs/occ_ep10/*seed*
     python experiments/optimum/val_eval.py --tag shipped continuum_gym/agents/policies/ViewTracking-v0/*dimension*
     python experiments/optimum/val_eval.py --base ContinuumGym/OcclusionAvoidance-v0
-    python experiments/optimum/val_eval.py --pending occ_s2   # the finished runs of runs/occ_s2/ not yet scored
-    python experiments/optimum/val_eval.py --selection --tag vt_s3_lin6m RUN/checkpoints/step_*/model.zip RUN
+    python experiments/optimum/val_eval.py --pending occ_ep10   # the finished runs of runs/occ_ep10/ not yet scored
+    python experiments/optimum/val_eval.py --selection --tag vt_mix_s3_lin20m RUN/checkpoints/step_*/model.zip RUN
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Issue 38, Campaign 6: fine-tune a trained ViewTracking residual at a small learning rate (precision near 0.8).
 
-The coverage the shipped residual loses is mostly near misses (``vt_failures.py``): targets whose optimum OR is
+The coverage the shipped residual loses is mostly near misses (Campaign 6 in experiments/notebook.md): targets whose optimum OR is
 just above 0.8, where the policy settles 0.01-0.02 below it. This continues PPO from a run's ``model.zip``
 with a new learning-rate schedule (``--lr``, linear to 0), on a task of choice (``--task``, a plug-in's with
 ``--import``), and writes ``model.zip`` + ``config.yml`` for ``val_eval.py``. The reward normaliser starts

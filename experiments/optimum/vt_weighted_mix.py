@@ -6,7 +6,7 @@ hold a coverage-map target, one third follows a random da Vinci motion. Built fr
 (``view_tasks``), so every instance is one of the built-in families' instances, and no instance appears twice.
 
 Use: ``continuum-gym --import vt_weighted_mix train ...`` with this directory on ``PYTHONPATH``
-(``run_queue.py --import vt_weighted_mix`` does both; see vt_mix2_s3_lin20m.yml).
+(``run_queue.py --import vt_weighted_mix`` does both; Campaign 6 in experiments/notebook.md).
 """
 
 from __future__ import annotations
