@@ -89,10 +89,17 @@ def _readme_section(match: re.Match) -> str:
 
 
 def _site_links(text: str) -> str:
-    """Links relative to the repository root, made relative to docs/ (or absolute outside docs/)."""
-    text = re.sub(r"\]\(docs/([^)]+)\)", r"](\1)", text)
-    return re.sub(r"\]\((?!https?:|#|[\w-]+\.md)([^)]+)\)",
-                  r"](https://github.com/continuum-gym/continuum-gym/blob/main/\1)", text)
+    """Links relative to the repository root (the README's, the changelog's) made relative to a page at the root of
+    docs/: ``docs/PAGE`` becomes ``PAGE``, any other file ``../PATH`` (which ``site_links.py`` then writes as its
+    repository path: the project has no public address to link to)."""
+
+    def relative(match: re.Match) -> str:
+        target = match.group(1)
+        if re.match(r"[a-zA-Z][a-zA-Z0-9+.-]*:|#|/", target):
+            return match.group(0)
+        return f"]({target.removeprefix('docs/')})" if target.startswith("docs/") else f"](../{target})"
+
+    return re.sub(r"\]\(([^()\s]+)\)", relative, text)
 
 
 def _include_file(match: re.Match) -> str:

@@ -202,7 +202,7 @@ def page(data: dict) -> str:
 Every learned run of the reference campaign (issue 35), evaluated once on the **test split**:
 residual PPO, SAC and TD3 on each env's headline baseline (5 seeds each) and pure-RL PPO and SAC
 (3 seeds each), beside the analytic baselines, the packaged bases (ViewTracking's `distilled_optimum`, a controller
-distilled from the offline optimum: [optimum experiments](optimum-experiments.md#campaign-12-2026-12-07)) and the
+distilled from the offline optimum: [the lab notebook](../experiments/notebook.md#campaign-12-2026-12-07)) and the
 offline optimum. Hyperparameters were chosen on
 the validation split only (`continuum_gym/agents/hyperparams/*.yml`, each choice commented with its
 measurement); budgets and protocol: [benchmark protocol](protocol.md). Regenerate this page (tables,
@@ -227,7 +227,7 @@ and can differ in the last digit from the README's table.
 
 **Training cost.** Env steps per run are the runs' own counts (PPO rounds up to whole rollouts).
 `continuum-gym train` does not record time, so the wall-clock per run and the learning curves against
-wall-clock are derived from the Ray Tune trial of each run (`scripts/collect_wall_clock.py` wrote
+wall-clock are derived from the Ray Tune trial of each run (`experiments/reference_runs/collect_wall_clock.py` wrote
 `wall_clock.csv` beside each run's `evaluations.npz`): the running sum of Tune's `time_this_iter_s`
 over the trial's reports, i.e. the trial process's wall-clock including start-up, the 16-task validation
 evaluations and checkpoints; a trial killed and resumed counts both sessions, not the work lost between

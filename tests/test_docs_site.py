@@ -3,6 +3,7 @@ navigation, API objects that cannot be found, docstrings whose parameters lack t
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -25,3 +26,27 @@ def test_the_docs_site_builds_strictly_with_the_env_pages(tmp_path):
     assert "readme-section" not in results and "headroom" in results.lower()
     api = (site / "api" / "index.html").read_text()
     assert "evaluate_policy" in api and "MultiBackboneRobot" in api
+    # Links that leave docs/ (docs/site_links.py): the notebook by its path, the changelog to its page.
+    assert "<code>experiments/notebook.md</code> in the repository" in results and "optimum-experiments" not in results
+    assert 'href="../changelog/"' in (site / "performance" / "index.html").read_text()
+
+
+def _site_links():
+    spec = importlib.util.spec_from_file_location("site_links", ROOT / "docs" / "site_links.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_link_that_leaves_docs_becomes_the_files_path_or_the_page_that_shows_it():
+    links = _site_links()
+    page = "tutorials/extend.md"
+    markdown = ("[the notebook](../../experiments/notebook.md#campaign-6) [train](train.md) [api](../api.md#x) "
+                "[out](https://example.org/a.md) [`examples/my_reach`](../../examples/my_reach/) ![a](../img/a.png)\n"
+                "```\n[in code](../../README.md)\n```\n[log](../../CHANGELOG.md#unreleased)")
+    out = links.outside_links(markdown, page, {"CHANGELOG.md": "changelog.md"})
+    assert out.split("\n") == [
+        "the notebook, `experiments/notebook.md` in the repository [train](train.md) [api](../api.md#x) "
+        "[out](https://example.org/a.md) `examples/my_reach` ![a](../img/a.png)",
+        "```", "[in code](../../README.md)", "```", "[log](../changelog.md#unreleased)"]
+    assert links.outside_links("[n](../experiments/notebook.md)", "results.md") == "n, `experiments/notebook.md` in the repository"

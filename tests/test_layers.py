@@ -153,7 +153,6 @@ ENV_NAMING = {
     "continuum_gym.render.view_scene": "the ViewTracking scene (spec.scene)",
     "continuum_gym.evaluation.optimum.occlusion": "the OcclusionAvoidance optimum (spec.optimum)",
     "continuum_gym.evaluation.optimum.rate_bound": "the OcclusionAvoidance hold tasks' rate-limited bound",
-    "continuum_gym.evaluation.residual_reach": "ViewTracking's residual reach study",
     "continuum_gym.agents.distilled_view": "ViewTracking's distilled-optimum base, a registered controller",
 }
 

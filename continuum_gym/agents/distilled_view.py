@@ -2,7 +2,7 @@
 that steers the joints to its configuration.
 
 Why: the learned residuals on the dimension-reduced IK settle on many targets in another configuration than the
-best one (docs/optimum-experiments.md, Campaigns 6-11); the best configuration is a function of the target once
+best one (experiments/notebook.md, Campaigns 6-11); the best configuration is a function of the target once
 its labels are made smooth by continuation (Campaign 11). This base gives the residual that configuration.
 
 The network (``distilled_view.npz``: two tanh layers of 128) maps the da Vinci configuration the target comes
@@ -10,8 +10,8 @@ from (``davinci_configuration``, the exact inverse of ``davinci_pose``), scaled 
 ((L_dV - 0.065 m) / 0.015 m, yaw / (pi/3), pitch / (pi/3), roll / (pi/4)), to the configuration encoded as
 (L0 / 0.1 m, theta1, theta2, cos phi, sin phi, theta1 (cos, sin) delta1, theta2 (cos, sin) delta2). It was
 fitted (20,000 minibatch Adam steps) to 89,600 continuation labels over insertion 0.050-0.080 m x yaw, pitch in
-[-pi/3, pi/3] x roll in [-pi/4, pi/4), all training-split targets: ``scripts/optimum/vt_smooth_labels_4d.py``
-made the labels, ``scripts/optimum/vt_label_fit_4d.py --width 128 --steps 20000 --save`` the weights.
+[-pi/3, pi/3] x roll in [-pi/4, pi/4), all training-split targets: ``experiments/optimum/vt_smooth_labels_4d.py``
+made the labels, ``experiments/optimum/vt_label_fit_4d.py --width 128 --steps 20000 --save`` the weights.
 
 The controller: rate = ``GAIN`` x (network configuration - q), the bend directions by their shortest angle,
 each joint's rate capped at ``CAP`` action units (``ACTION_SCALE``); then, while the OR is at least

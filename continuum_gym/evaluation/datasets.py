@@ -27,6 +27,7 @@ import argparse
 import dataclasses
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -172,11 +173,13 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
                    f"the {split} split" + (f", with Gaussian residuals of std {noise:g}" if noise else "")
                    + f"; seeds {seed}..{seed + episodes - 1}. Recorded by continuum-gym dataset.")
     try:
-        dataset = minari.create_dataset_from_buffers(
-            dataset_id=name, buffer=buffers, env=env_spec, eval_env=env_spec, algorithm_name=controller,
-            author="continuum-gym", author_email="continuum-gym@users.noreply.github.com",
-            code_permalink="https://github.com/continuum-gym/continuum-gym", description=description,
-            data_format="hdf5", requirements=["continuum-gym"])
+        with warnings.catch_warnings():
+            # No code_permalink or author_email: the project has no public repository or contact address to
+            # record, and Minari's reminder that they are unset would print with every dataset.
+            warnings.filterwarnings("ignore", "`(code_permalink|author_email)` is set to None", UserWarning)
+            dataset = minari.create_dataset_from_buffers(
+                dataset_id=name, buffer=buffers, env=env_spec, eval_env=env_spec, algorithm_name=controller,
+                author="continuum-gym", description=description, data_format="hdf5", requirements=["continuum-gym"])
     except BaseException:  # a half-written dataset would shadow the id: remove it
         if name in minari.list_local_datasets():
             minari.delete_dataset(name)

@@ -6,7 +6,6 @@ The reference runs are part of the repository: these tests read them, and ``cont
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -103,20 +102,3 @@ def test_evaluate_on_the_reference_layout_gives_every_learned_row_its_algo_seeds
         assert row[TRAINING]["env_steps_per_run"][0] >= 1_000_000
     assert IMPROVEMENT not in table["projected_gradient"] and TRAINING not in table["minimum_norm"]
 
-
-def _script(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_wall_clock_sums_every_report_across_a_restart(tmp_path):
-    collect = _script("collect_wall_clock")
-    progress = tmp_path / "progress.csv"
-    progress.write_text("timesteps,time_this_iter_s,time_total_s,iterations_since_restore\n"
-                        "100,10.0,10.0,1\n200,5.0,15.0,2\n"  # killed after 200; resumed from a checkpoint:
-                        "300,20.0,20.0,1\n400,4.0,24.0,2\n")
-    rows = collect.wall_clock_rows(progress)
-    assert [r["elapsed_s"] for r in rows] == [10.0, 15.0, 35.0, 39.0]
-    assert [r["session"] for r in rows] == [0, 0, 1, 1]

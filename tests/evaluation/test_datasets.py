@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import minari
 import numpy as np
@@ -22,11 +24,17 @@ def root(tmp_path, monkeypatch):
 
 
 def test_a_dataset_round_trips_equal_to_a_fresh_rollout(root):
-    dataset = create_dataset(VIEW, "resolved_rate", split="validation", episodes=2, noise=0.3, seed=4)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        dataset = create_dataset(VIEW, "resolved_rate", split="validation", episodes=2, noise=0.3, seed=4)
+    assert not [w for w in caught if "is set to None" in str(w.message)], [str(w.message) for w in caught]
     name = "continuum-gym/ViewTracking/resolved_rate-validation-noise0p3-v0"
     assert dataset.spec.dataset_id == name == dataset_id(VIEW, "resolved_rate", "validation", 0.3)
     loaded = minari.load_dataset(name)
     assert loaded.total_episodes == 2
+    # The project has no public address: no metadata field points at one.
+    metadata = loaded.storage.metadata
+    assert metadata["author"] == {"continuum-gym"} and not {"code_permalink", "author_email"} & set(metadata)
     env = loaded.recover_environment()
     config = env.spec.kwargs["config"]  # the whole config, as EnvConfig.to_dict writes it
     assert config["base_controller"] == "resolved_rate" and config["task_split"] == "validation"
