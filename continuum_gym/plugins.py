@@ -22,7 +22,7 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from importlib import metadata
 from types import ModuleType
 from typing import Any
@@ -114,7 +114,7 @@ def load_object(reference: str) -> Any:
     return getattr(importlib.import_module(module), name)
 
 
-def lazy_exports(package: str, exports: dict[str, str]):
+def lazy_exports(package: str, exports: dict[str, str]) -> Callable[[str], Any]:
     """A package's module ``__getattr__``: ``name`` from its submodule ``exports[name]``, imported on first use (so
     that importing the package registers its ids without compiling anything)."""
     def __getattr__(name: str) -> Any:

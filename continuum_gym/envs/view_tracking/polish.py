@@ -1,6 +1,6 @@
 """ViewTracking's optional overlap polish (``overlap_polish``): a one-step lookahead on the overlap ratio.
 
-The learned residuals settle 0.01-0.02 below an OR they could hold on many targets (docs/optimum-experiments.md,
+The learned residuals settle 0.01-0.02 below an OR they could hold on many targets (experiments/notebook.md,
 Campaigns 6-7). The polish moves each row's action along the gradient of the OR predicted for the next
 configuration, by the step (of ``POLISH_FRACTIONS`` times ``overlap_polish``, in action units) that maximises that
 predicted OR, where it beats the action as given, and only while the observed OR is at least ``POLISH_MIN_OR``
