@@ -209,7 +209,7 @@ class Cameras:
         fx, fy, cx, cy = K[:, 0, 0], K[:, 1, 1], K[:, 0, 2], K[:, 1, 2]
         dx = np.maximum(np.abs(0.0 - cx), np.abs(width - 1.0 - cx)) / fx
         dy = np.maximum(np.abs(0.0 - cy), np.abs(height - 1.0 - cy)) / fy
-        return k1_lower_bound(np.maximum(np.hypot(dx, dy), 1e-9))
+        return -4.0 / (27.0 * np.maximum(np.hypot(dx, dy), 1e-9) ** 2)  # k1_lower_bound, per row
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -227,8 +227,8 @@ class Cameras:
         """The same cameras with radial distortion ``k1`` (scalar or (N,))."""
         return replace(self, k1=np.broadcast_to(np.asarray(k1, dtype=np.float64), (self.num_rows,)))
 
-    def rows(self, index: ArrayLike | slice) -> Cameras:
-        """The cameras of some rows (an index array or a slice)."""
+    def rows(self, index: np.ndarray | slice) -> Cameras:
+        """The cameras of some rows (an integer or boolean index array, or a slice)."""
         return replace(self, intrinsics=self.intrinsics[index], poses=self.poses[index], k1=self.k1[index])
 
     # ------------------------------------------------------------------ properties

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = ["COLORS", "CAVITY"]
 
 #: colour (uint8 RGB) of rays that hit nothing in an endoscope image (an unlit cavity)
 CAVITY = (14, 8, 8)
 
-COLORS = {
+#: RGBA of each body (a tuple of RGBA for the robots' segments)
+COLORS: dict[str, Any] = {
     "straight": (0.55, 0.57, 0.62, 1.0),
     "segments": ((0.80, 0.80, 0.84, 1.0), (0.62, 0.78, 0.90, 1.0), (0.90, 0.82, 0.55, 1.0)),
     "disk": (0.25, 0.27, 0.30, 1.0),

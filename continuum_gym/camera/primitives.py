@@ -185,8 +185,10 @@ def effective_radius(r, sides, wx, wy, wz, ux, uy, uz, mx, my, mz):
 
 @kernel(inline="always")
 def prism_planes(sides, wx, wy, wz, ux, uy, uz, m):
-    """m_k = v_k x w for the sides / 2 vertex directions v_k = cos(2 pi k / sides) u + sin(2 pi k / sides) (w x u) of
-    a prism of an even number of sides (the other half are their negatives); returns their count (0: round)."""
+    """The vectors that draw a prism of an even number of ``sides`` (vertex direction u, unit axis w), into m (64, 3):
+    rows k < sides / 2, m_k = v_k x w for the vertex directions v_k = cos(2 pi k / sides) u + sin(2 pi k / sides)
+    (w x u) (the other half are their negatives); rows 32 + k, the unit normals of the faces between v_k and
+    v_{k+1} (the other faces' are their negatives). Returns sides / 2 (0 for a round tube)."""
     if sides <= 0:
         return 0
     vx = wy * uz - wz * uy
@@ -200,6 +202,10 @@ def prism_planes(sides, wx, wy, wz, ux, uy, uz, m):
         m[k, 0] = py * wz - pz * wy
         m[k, 1] = pz * wx - px * wz
         m[k, 2] = px * wy - py * wx
+        c, s = math.cos(angle + math.pi / sides), math.sin(angle + math.pi / sides)
+        m[32 + k, 0] = c * ux + s * vx
+        m[32 + k, 1] = c * uy + s * vy
+        m[32 + k, 2] = c * uz + s * vz
     return count
 
 
@@ -212,7 +218,8 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
     ray d, as the cylinder whose radius is the prism's support across the ray, h = r max_k |d . m_k| / |w x d|:
     a ray meets the infinite prism exactly when it meets that cylinder (its projection across the axis is a
     line, which meets a centrally symmetric polygon when its distance from the centre is at most the polygon's
-    support along its normal). ``nv`` = 0: a round tube, h = r. A round end at b is a sphere of radius ``r_cap``.
+    support along its normal); where it does, the ray's entry is found across the prism's slabs (``m[32:]``), so
+    depth is the prism's. ``nv`` = 0: a round tube, h = r. A round end at b is a sphere of radius ``r_cap``.
     The test of a pixel the tube misses takes no square root and no division. ``red``, ``green``, ``blue`` are
     the albedo x 255.
     """
@@ -221,6 +228,7 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
     aw = a0 * w0 + a1 * w1 + a2 * w2
     a_perp2 = a0 * a0 + a1 * a1 + a2 * a2 - aw * aw
     r2 = r * r
+    apothem = r * math.cos(math.pi / (2 * nv)) if nv > 0 else r
     round_cap = cap_b == 2
     bb = b0 * b0 + b1 * b1 + b2 * b2 - r_cap * r_cap
     for i in range(i0, i1 + 1):
@@ -255,9 +263,23 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
                 continue
             best = math.inf
             kind = 0
+            face = -1
             if disc >= 0.0:
-                # the solid cylinder: between the roots of the infinite one and between the end planes
-                if A > 1e-14 * d2:
+                # the solid tube: inside the infinite tube and between the end planes
+                if nv > 0:
+                    # the prism: the latest entry and earliest exit across its slabs |(X - a) . f_k| <= apothem
+                    t0 = -math.inf
+                    t1 = math.inf
+                    for k in range(nv):
+                        dm = x * m[32 + k, 0] + y * m[32 + k, 1] + m[32 + k, 2]
+                        am = a0 * m[32 + k, 0] + a1 * m[32 + k, 1] + a2 * m[32 + k, 2]
+                        ta = (am - apothem) / dm
+                        tb = (am + apothem) / dm
+                        if min(ta, tb) > t0:
+                            t0 = min(ta, tb)
+                            face = k
+                        t1 = min(t1, max(ta, tb))
+                elif A > 1e-14 * d2:
                     sq = math.sqrt(disc)
                     t0 = (B - sq) / A
                     t1 = (B + sq) / A
@@ -295,10 +317,11 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
             seg[srow, i, j, 0] = seg_id
             if want_rgb:
                 # cosine between the surface normal and the ray (the light is at the camera)
-                if kind == 1:
+                if kind == 1 and face >= 0:
+                    c = abs(x * m[32 + face, 0] + y * m[32 + face, 1] + m[32 + face, 2])
+                elif kind == 1:
                     s = best * dw - aw
-                    c = abs(best * d2 - da - s * dw) * math.sqrt(A / hA) if nv > 0 else \
-                        abs(best * d2 - da - s * dw) / r
+                    c = abs(best * d2 - da - s * dw) / r
                 elif kind == 3:
                     c = abs(best * d2 - e) / r_cap
                 else:

@@ -185,7 +185,7 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
     ys = np.empty(height)
     rays = np.empty((height, width, 2))
     spans = np.empty((height, 2), dtype=np.int64)
-    m = np.empty((32, 3))
+    m = np.empty((64, 3))
     o, ex, ey, nrm = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     no_store = np.empty((0, 0, 3))
     n_tubes = tubes.radius.shape[0]

@@ -144,7 +144,9 @@ class Renderer:
         cache = self._cache(spec.plane, plane, texture, cameras, shade.fov_tan)
         run_blocks(render_rows, (camera_args, tube_args, spec.group_mask, plane, texture, shade, cache, outputs), n,
                    self.threads, self.block)
-        return Frames(*(buffers[m] if m in modalities else None for m in MODALITIES), cameras=cameras)
+        return Frames(buffers["rgb"] if "rgb" in modalities else None,
+                      buffers["depth"] if "depth" in modalities else None,
+                      buffers["segmentation"] if "segmentation" in modalities else None, cameras)
 
     # ------------------------------------------------------------------ caches
     @staticmethod

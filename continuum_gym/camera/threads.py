@@ -24,14 +24,13 @@ os.register_at_fork(after_in_child=_EXECUTORS.clear)  # a forked child has none 
 
 
 def default_threads(threads: int | None = None) -> int:
-    """``threads`` in [1, NUMBA_NUM_THREADS], or the default: 1 when torch is loaded (a learner computes with
-    its own threads there), else numba's thread count, read without starting numba's threading layer."""
+    """``threads`` in [1, 256], or the default: 1 when torch is loaded (a learner computes with its own threads
+    there), else numba's thread count (NUMBA_NUM_THREADS, the cores), read without starting its threading layer."""
     import numba
 
-    limit = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]  # set by numba.config at import
     if threads is None:
-        return 1 if "torch" in sys.modules else limit
-    return integer(threads, "threads", low=1, high=limit)
+        return 1 if "torch" in sys.modules else int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+    return integer(threads, "threads", low=1, high=256)
 
 
 def _executor(helpers: int) -> concurrent.futures.ThreadPoolExecutor:

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Collection
 from types import ModuleType
 from typing import Any
 
@@ -68,6 +69,10 @@ class Scene:
     cameras: tuple[str, ...]
     external_camera: dict[str, Any]
     _external: tuple[np.ndarray, np.ndarray]
+    # Set by every scene's constructor: the endoscope cameras' vertical field of view (rad) and clip distances (m).
+    fov_y: float
+    near: float
+    far: float
 
     def __init__(self, texture_seed: int = 0, texture_size: int = 512, texture_features: float = 1.0) -> None:
         p, bullet_client = import_pybullet()
@@ -265,6 +270,30 @@ class Scene:
             ext["fov"] = number(fov, "fov", low=0.0, high=180.0, low_open=True, high_open=True, unit="deg")
         self._external = external_frame(ext["target"], ext["distance"], ext["azimuth"], ext["elevation"])
         self.external_camera = ext
+
+    def camera_pose(self, camera: str = "endoscope") -> tuple[np.ndarray, np.ndarray]:
+        """(p, R) of ``camera`` in {w}; every scene class defines it."""
+        raise NotImplementedError
+
+    def camera_image(self, camera: str, groups: Collection[str], width: int = 128,
+                     height: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """An endoscope camera's image of exactly the body ``groups`` (names of ``body_ids``), for comparisons
+        with another renderer: (rgb (H, W, 3) uint8, body id of each pixel (H, W) int, -1 where nothing is
+        hit, depth (H, W) float32 in m along the optical axis, ``far`` where nothing is hit).
+
+        Unlike ``render``, nothing is culled and no background is filled in or cached.
+        """
+        if camera not in self.cameras or camera == "external":
+            raise ValueError(f"camera must be one of {[c for c in self.cameras if c != 'external']}; got {camera!r}")
+        unknown = set(groups) - set(self._groups)
+        if unknown:
+            raise ValueError(f"groups must be among {sorted(self._groups)}; got {sorted(unknown)}")
+        p_cam, R_cam = self.camera_pose(camera)
+        self._show(set(groups))
+        rgba, seg = self._render(p_cam, R_cam, self.fov_y, width, height, self.near, self.far, -R_cam[:, 2],
+                                 segmentation=True)
+        ids = np.where(seg >= 0, seg & 0xFFFFFF, -1)
+        return rgba[..., :3].copy(), ids, self.last_depth()
 
     def _robot_mask(self, seg):
         seg = np.where(seg >= 0, seg & 0xFFFFFF, -1)
