@@ -195,23 +195,49 @@ def prism_planes(sides, wx, wy, wz, ux, uy, uz, m):
     vy = wz * ux - wx * uz
     vz = wx * uy - wy * ux
     count = sides // 2
+    step_c, step_s = math.cos(2.0 * math.pi / sides), math.sin(2.0 * math.pi / sides)
+    half_c, half_s = math.cos(math.pi / sides), math.sin(math.pi / sides)
+    c, s = 1.0, 0.0  # cos and sin of 2 pi k / sides, by rotation (a few ulps from the trigonometric values)
     for k in range(count):
-        angle = 2.0 * math.pi * k / sides
-        c, s = math.cos(angle), math.sin(angle)
         px, py, pz = c * ux + s * vx, c * uy + s * vy, c * uz + s * vz
         m[k, 0] = py * wz - pz * wy
         m[k, 1] = pz * wx - px * wz
         m[k, 2] = px * wy - py * wx
-        c, s = math.cos(angle + math.pi / sides), math.sin(angle + math.pi / sides)
-        m[32 + k, 0] = c * ux + s * vx
-        m[32 + k, 1] = c * uy + s * vy
-        m[32 + k, 2] = c * uz + s * vz
+        fc, fs = c * half_c - s * half_s, s * half_c + c * half_s
+        m[32 + k, 0] = fc * ux + fs * vx
+        m[32 + k, 1] = fc * uy + fs * vy
+        m[32 + k, 2] = fc * uz + fs * vz
+        c, s = c * step_c - s * step_s, s * step_c + c * step_s
     return count
 
 
-@kernel(error_model="numpy")
+@kernel(inline="always")
+def tube_candidate(x, y, a0, a1, a2, w0, w1, w2, aw, circumscribed, L, b0, b1, b2, bb, round_cap):
+    """Whether the ray (x, y, 1) meets the finite round tube from a along the unit w for L
+    (|a_perp|^2 - r^2 = ``circumscribed``) or, if ``round_cap`` is 1, the sphere at b (|b|^2 - r_cap^2 = ``bb``):
+    what a tube can cover. Polynomial, without branches, divisions or roots (a loop of it vectorises).
+
+    The ray meets the infinite tube for t in B / A +- sqrt(disc) / A, where the axis coordinate is
+    s = t (d . w) - a . w: A s = S +- |d . w| sqrt(disc) with S = B (d . w) - (a . w) A. That range meets [0, L]
+    when S >= -|d . w| sqrt(disc) and S - L A <= |d . w| sqrt(disc), compared in squares.
+    """
+    dw = x * w0 + y * w1 + w2
+    d2 = x * x + y * y + 1.0
+    A = d2 - dw * dw
+    B = x * a0 + y * a1 + a2 - dw * aw
+    disc = B * B - A * circumscribed
+    S = B * dw - aw * A
+    reach = dw * dw * disc
+    above = S - L * A
+    tube = (disc >= 0.0) & ((S >= 0.0) | (S * S <= reach)) & ((above <= 0.0) | (above * above <= reach))
+    e = x * b0 + y * b1 + b2
+    return tube | ((e * e - d2 * bb >= 0.0) & (round_cap > 0.0))
+
+
+@kernel(error_model="numpy", borrows=True)
 def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1, a2, b0, b1, b2, r, nv, m, r_cap,
-              cap_a, cap_b, seg_id, red, green, blue, ambient, diffuse, want_rgb, rgb, row, zbuf, zrow, seg, srow):
+              cap_a, cap_b, seg_id, red, green, blue, ambient, diffuse, want_rgb, rgb, row, zbuf, zrow, seg, srow,
+              candidates):
     """Z-buffer one tube (camera-frame ends a, b, circumradius r) over the pixels [i0, i1] x [j0, j1].
 
     A prism (``nv`` > 0 vertex directions v_k, given as m_k = v_k x w, w the unit axis) is drawn, for each pixel's
@@ -220,8 +246,9 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
     line, which meets a centrally symmetric polygon when its distance from the centre is at most the polygon's
     support along its normal); where it does, the ray's entry is found across the prism's slabs (``m[32:]``), so
     depth is the prism's. ``nv`` = 0: a round tube, h = r. A round end at b is a sphere of radius ``r_cap``.
-    The test of a pixel the tube misses takes no square root and no division. ``red``, ``green``, ``blue`` are
-    the albedo x 255.
+    Each image row is done in two passes: which pixels the circumscribed round tube (or the round end) covers,
+    without branches (vectorised, into ``candidates`` (W,) bool), then those pixels exactly. ``red``, ``green``,
+    ``blue`` are the albedo x 255. It only borrows its arrays (no reference counting: it is called per tube).
     """
     L = math.sqrt((b0 - a0) ** 2 + (b1 - a1) ** 2 + (b2 - a2) ** 2)
     w0, w1, w2 = (b0 - a0) / L, (b1 - a1) / L, (b2 - a2) / L
@@ -231,11 +258,25 @@ def draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1,
     apothem = r * math.cos(math.pi / (2 * nv)) if nv > 0 else r
     round_cap = cap_b == 2
     bb = b0 * b0 + b1 * b1 + b2 * b2 - r_cap * r_cap
+    round_cap_flag = 1.0 if round_cap else 0.0
+    circumscribed = a_perp2 - r2
     for i in range(i0, i1 + 1):
         lo = max(j0, spans[i, 0])
         hi = min(j1, spans[i, 1])
         y = ys[i]
+        # candidates, without branches (vectorised): the pixels whose ray meets the circumscribed round tube or
+        # the round end
+        if distorted:
+            for j in range(lo, hi + 1):
+                candidates[j] = tube_candidate(rays[i, j, 0], rays[i, j, 1], a0, a1, a2, w0, w1, w2, aw, circumscribed,
+                                               L, b0, b1, b2, bb, round_cap_flag)
+        else:
+            for j in range(lo, hi + 1):
+                candidates[j] = tube_candidate(xs[j], y, a0, a1, a2, w0, w1, w2, aw, circumscribed, L, b0, b1, b2,
+                                               bb, round_cap_flag)
         for j in range(lo, hi + 1):
+            if not candidates[j]:
+                continue
             if distorted:
                 x = rays[i, j, 0]
                 y = rays[i, j, 1]
@@ -343,18 +384,19 @@ def mip_level(footprint, last):
 
 
 @kernel(inline="always")
-def plane_hit(x, y, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy, tx_m, ty_m, near, far,
-              size0, last, footprint_scale):
-    """(depth, cosine, texel index) where the ray (x, y, 1) meets the plane's front face (normal n, axes ex, ey in
-    the camera frame) within [near, far] and its rectangle, else (far, -1, -1). Scalars only and no branches: a
-    loop of it over a row of pixels vectorises."""
+def plane_hit(x, y, inv_norm, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy, tx_m, ty_m, near,
+              far, size0, last, footprint_scale):
+    """(depth, cosine, texel index) where the ray (x, y, 1) (of length 1 / ``inv_norm``) meets the plane's front
+    face (normal n, axes ex, ey in the camera frame) within [near, far] and its rectangle, else (far, -1, -1).
+    Scalars only, one division and no branches: a loop of it over a row of pixels vectorises."""
     nd = x * n0 + y * n1 + n2
-    t = num / nd
+    inv = 1.0 / nd
+    t = num * inv
     lx = t * (x * ex0 + y * ex1 + ex2) - ox
     ly = t * (x * ey0 + y * ey1 + ey2) - oy
     d2 = x * x + y * y + 1.0
     hit = visible & (nd < 0.0) & (t >= near) & (t <= far) & (abs(lx) <= hx) & (abs(ly) <= hy)
-    level = mip_level(t * d2 / -nd * footprint_scale, last)
+    level = mip_level(-num * d2 * inv * inv * footprint_scale, last)  # t |d|^2 / |n . d| in level-0 texels
     size = size0 >> level
     u = min(max((lx + hx) * tx_m * size, 0.0), 1e9)  # >= 0: truncation is floor
     v = min(max((ly + hy) * ty_m * size, 0.0), 1e9)
@@ -363,19 +405,20 @@ def plane_hit(x, y, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, 
     # TinyRenderer reads the image bottom up)
     total = 2 * size0 * size0
     k = total - (total >> level) + ((-1 - np.int64(v)) & (size - 1)) * size + (np.int64(u) & (size - 1))
-    return (t if hit else far), (-nd / math.sqrt(d2) if hit else -1.0), (k if hit else -1)
+    return (t if hit else far), (-nd * inv_norm if hit else -1.0), (k if hit else -1)
 
 
 @kernel(error_model="numpy")
-def draw_plane(xs, ys, distorted, rays, spans, near, far, visible, o, ex, ey, n, half, tiles, texture, fx,
+def draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, half, tiles, texture, fx,
                cavity, ambient, diffuse, want_rgb, rgb, row, zbuf, zrow, seg, srow, albedo, cosine):
     """Background of one image: the plane's texture where a ray meets its front face within [near, far] and its
-    rectangle, else the cavity colour (unlit) at depth ``far``. With ``albedo`` (H, W, 3) and ``cosine`` (H, W) of
-    the image's size, the unshaded colour (in [0, 255]) and the cosine (-1: unlit) are stored as well.
+    rectangle, else the cavity colour (unlit) at depth ``far``. ``inv_norm`` (H, W): 1 / |ray| of each pixel. With
+    ``albedo`` (H, W, 3) and ``cosine`` (H, W) of the image's size, the unshaded colour (in [0, 255]) and the
+    cosine (-1: unlit) are stored as well.
 
     The texel is read from the mip level whose texels match the pixel's footprint on the plane (t |d|^2 /
     |n . d| / f metres). Each image row is done in two passes: the geometry of every pixel, without branches (it
-    vectorises), then the texture reads and the writes.
+    vectorises), then the texture reads (packed 8-bit texels, the light in fixed point) and the writes.
     """
     keep = albedo.shape[0] == zbuf.shape[1]
     height, width = zbuf.shape[1], zbuf.shape[2]
@@ -388,49 +431,43 @@ def draw_plane(xs, ys, distorted, rays, spans, near, far, visible, o, ex, ey, n,
     last = texture.sizes.shape[0] - 1
     size0 = texture.sizes[0]
     packed = texture.packed
-    c0 = np.int64(shade(255.0 * cavity[0]))
-    c1 = np.int64(shade(255.0 * cavity[1]))
-    c2 = np.int64(shade(255.0 * cavity[2]))
+    c0, c1, c2 = shade(255.0 * cavity[0]), shade(255.0 * cavity[1]), shade(255.0 * cavity[2])
     depth_row = np.empty(width)
     cos_row = np.empty(width)
     texel_row = np.empty(width, dtype=np.int64)
-    gain_row = np.empty(width, dtype=np.int64)
     n0, n1, n2 = n[0], n[1], n[2]
     ex0, ex1, ex2 = ex[0], ex[1], ex[2]
     ey0, ey1, ey2 = ey[0], ey[1], ey[2]
     for i in range(height):
         lo = spans[i, 0]
         hi = spans[i, 1]
-        # geometry: without branches, vectorised
         if distorted:
             for j in range(lo, hi + 1):
                 depth_row[j], cos_row[j], texel_row[j] = plane_hit(
-                    rays[i, j, 0], rays[i, j, 1], visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx,
-                    hy, tx_m, ty_m, near, far, size0, last, footprint_scale)
+                    rays[i, j, 0], rays[i, j, 1], inv_norm[i, j], visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1,
+                    ey2, ox, oy, hx, hy, tx_m, ty_m, near, far, size0, last, footprint_scale)
         else:
             y = ys[i]
             for j in range(lo, hi + 1):
                 depth_row[j], cos_row[j], texel_row[j] = plane_hit(
-                    xs[j], y, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy, tx_m, ty_m, near,
-                    far, size0, last, footprint_scale)
+                    xs[j], y, inv_norm[i, j], visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy,
+                    tx_m, ty_m, near, far, size0, last, footprint_scale)
         for j in range(lo, hi + 1):
+            k = texel_row[j]
             zbuf[zrow, i, j, 0] = depth_row[j]
             seg[srow, i, j, 0] = 0
-            # the light's gain in 8-bit fixed point
-            gain_row[j] = np.int64((ambient + diffuse * cos_row[j]) * 256.0 + 0.5)
-        if want_rgb:
-            # colours in integers: one read of the packed texel, shifts and a multiply per channel
-            for j in range(lo, hi + 1):
-                k = texel_row[j]
-                hit = k >= 0
-                texel = np.int64(packed[k if hit else 0])
-                gain = gain_row[j]
-                r = min(((texel & 255) * gain + 128) >> 8, 255)
-                g = min((((texel >> 8) & 255) * gain + 128) >> 8, 255)
-                b = min((((texel >> 16) & 255) * gain + 128) >> 8, 255)
-                rgb[row, i, j, 0] = np.uint8(r if hit else c0)
-                rgb[row, i, j, 1] = np.uint8(g if hit else c1)
-                rgb[row, i, j, 2] = np.uint8(b if hit else c2)
+            if want_rgb:
+                if k >= 0:
+                    # one read of the packed texel; the light in 8-bit fixed point
+                    texel = np.int64(packed[k])
+                    gain = np.int64((ambient + diffuse * cos_row[j]) * 256.0 + 0.5)
+                    rgb[row, i, j, 0] = np.uint8(min(((texel & 255) * gain + 128) >> 8, 255))
+                    rgb[row, i, j, 1] = np.uint8(min((((texel >> 8) & 255) * gain + 128) >> 8, 255))
+                    rgb[row, i, j, 2] = np.uint8(min((((texel >> 16) & 255) * gain + 128) >> 8, 255))
+                else:
+                    rgb[row, i, j, 0] = c0
+                    rgb[row, i, j, 1] = c1
+                    rgb[row, i, j, 2] = c2
         if keep:
             for j in range(lo, hi + 1):
                 k = texel_row[j]

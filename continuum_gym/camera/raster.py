@@ -87,6 +87,19 @@ def fill_rays(K, k1, width, height, xs, ys, rays):
 
 
 @kernel(inline="always")
+def fill_inv_norm(K, k1, distorted, xs, ys, rays, key, inv_norm):
+    """1 / |ray| of every pixel into inv_norm (H, W), unless it holds them already for these intrinsics (``key``)."""
+    if not distorted and key[0] == K[0, 0] and key[1] == K[1, 1] and key[2] == K[0, 2] and key[3] == K[1, 2] \
+            and key[4] == 0.0:
+        return
+    for i in range(inv_norm.shape[0]):
+        for j in range(inv_norm.shape[1]):
+            x, y = (rays[i, j, 0], rays[i, j, 1]) if distorted else (xs[j], ys[i])
+            inv_norm[i, j] = 1.0 / math.sqrt(x * x + y * y + 1.0)
+    key[0], key[1], key[2], key[3], key[4] = K[0, 0], K[1, 1], K[0, 2], K[1, 2], k1
+
+
+@kernel(inline="always")
 def fill_spans(width, height, distorted, xs, ys, rays, fov_tan, spans):
     """First and last column (inclusive) of each image row inside the circular field of view (all: fov_tan <= 0):
     the pixels whose ray (x, y) has x^2 + y^2 <= fov_tan^2. A row's are contiguous (a disk is convex, the radial
@@ -184,8 +197,11 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
     xs = np.empty(width)
     ys = np.empty(height)
     rays = np.empty((height, width, 2))
+    inv_norm = np.empty((height, width))
+    norm_key = np.full(5, np.nan)  # the (fx, fy, cx, cy, k1) inv_norm was filled for
     spans = np.empty((height, 2), dtype=np.int64)
     m = np.empty((64, 3))
+    candidates = np.empty(width, dtype=np.bool_)
     o, ex, ey, nrm = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     no_store = np.empty((0, 0, 3))
     n_tubes = tubes.radius.shape[0]
@@ -202,12 +218,14 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
         diffuse = shade_args.diffuse[row]
         fill_rays(K, k1, width, height, xs, ys, rays)
         fill_spans(width, height, distorted, xs, ys, rays, shade_args.fov_tan, spans)
+        fill_inv_norm(K, k1, distorted, xs, ys, rays, norm_key, inv_norm)
         if cache.rows[row]:
-            zbuf[zrow] = cache.depth
-            seg[srow] = 0
+            # flat copies: numba's copy of an (H, W, 3) array goes element by element through its index
+            zbuf[zrow].reshape(-1)[:] = cache.depth.reshape(-1)
+            seg[srow].reshape(-1)[:] = 0
             if want_rgb:
                 if ambient == cache.ambient and diffuse == cache.diffuse:
-                    rgb[row] = cache.rgb
+                    rgb[row].reshape(-1)[:] = cache.rgb.reshape(-1)
                 else:
                     for i in range(height):
                         for j in range(width):
@@ -217,7 +235,7 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
                                 rgb[row, i, j, ch] = shade(cache.albedo[i, j, ch] * gain)
         else:
             visible = plane_in_camera(plane, R, p, o, ex, ey, nrm)
-            draw_plane(xs, ys, distorted, rays, spans, near, far, visible, o, ex, ey, nrm, plane.half,
+            draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, ex, ey, nrm, plane.half,
                        plane.tiles_per_metre, texture, K[0, 0], shade_args.cavity, ambient, diffuse, want_rgb, rgb, row,
                        zbuf, zrow, seg, srow, no_store, no_store[:, :, 0])
             zero_outside(spans, width, want_rgb, rgb, row, zbuf, zrow, seg, srow)
@@ -257,7 +275,7 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
             draw_tube(i0, i1, j0, j1, xs, ys, distorted, rays, spans, near, far, a0, a1, a2, b0, b1, b2, r, nv, m,
                       r_cap, tubes.caps[t, 0], tubes.caps[t, 1], tubes.ids[t], 255.0 * tubes.colors[t, 0],
                       255.0 * tubes.colors[t, 1], 255.0 * tubes.colors[t, 2], ambient, diffuse, want_rgb, rgb, row,
-                      zbuf, zrow, seg, srow)
+                      zbuf, zrow, seg, srow, candidates)
         if want_rgb and shade_args.noise_std > 0.0:
             seed = shade_args.seeds[row]
             for i in range(height):
@@ -279,6 +297,8 @@ def render_background(K, near, far, width, height, fov_tan, plane, texture, cavi
     spans = np.empty((height, 2), dtype=np.int64)
     fill_rays(K, 0.0, width, height, xs, ys, rays)
     fill_spans(width, height, False, xs, ys, rays, fov_tan, spans)
+    inv_norm = np.empty((height, width))
+    fill_inv_norm(K, 0.0, False, xs, ys, rays, np.full(5, np.nan), inv_norm)
     o, ex, ey, n = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     visible = plane_in_camera(plane, np.eye(3), np.zeros(3), o, ex, ey, n)
     rgb4 = rgb.reshape((1, height, width, 3))
@@ -286,6 +306,6 @@ def render_background(K, near, far, width, height, fov_tan, plane, texture, cavi
     seg4 = np.empty((1, height, width, 1), dtype=np.uint8)
     albedo[:] = 0.0
     cosine[:] = -1.0
-    draw_plane(xs, ys, False, rays, spans, near, far, visible, o, ex, ey, n, plane.half, plane.tiles_per_metre,
+    draw_plane(xs, ys, False, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, plane.half, plane.tiles_per_metre,
                texture, K[0, 0], cavity, ambient, diffuse, True, rgb4, 0, depth4, 0, seg4, 0, albedo, cosine)
     zero_outside(spans, width, True, rgb4, 0, depth4, 0, seg4, 0)
