@@ -8,7 +8,8 @@ For each environment, from the states of ``gym.make_vec(id, num_envs=N)`` after 
   ``view_tracking_scene``: the kinematics) and rendering rgb + depth + segmentation at size x size into
   preallocated buffers, on ``--threads`` threads; ViewTracking renders both views (the continuum
   endoscope's and the da Vinci's), which count as one frame. Best of several timed windows, by wall clock
-  and per CPU second of this process (on a shared machine the CPU rate is what the code does on free cores);
+  and per CPU second of this process (what one core does; "cores used" is their ratio: on a shared machine
+  the threads may get less than the cores asked for);
 - ``pybullet``: the environment's pybullet scene (``core.make_scene()``) in the same run, one frame per row
   as ``show_row`` + ``render("endoscope")`` (+ ``render("davinci")``) of the same size; one
   ``getCameraImage`` gives its rgb, depth and segmentation. TinyRenderer is single-threaded;
@@ -19,7 +20,7 @@ For each environment, from the states of ``gym.make_vec(id, num_envs=N)`` after 
 
 The issue's goal: >= 20,000 frames/s at 64 x 64, N = 1024, 2 cores.
 
-JSON keys: ``pixels.<env>.{frames_per_second,frames_per_cpu_second,build_us,render_us}``,
+JSON keys: ``pixels.<env>.{frames_per_second,frames_per_cpu_second,build_us,render_us,cores_used}``,
 ``pybullet.<env>.frames_per_second``, ``ratio.<env>`` (pixels / pybullet, derived),
 ``step.<env>.steps_per_second``, ``memory.<env>.{buffers_bytes_per_row,scene_bytes_per_row,rss_bytes_per_row}``.
 """
@@ -150,19 +151,21 @@ def main(argv=None) -> int:
         venv.close()
         buffers_per_row = sum(a.nbytes for b in buffers.values() for a in b.values()) / n
         results[f"pixels.{name}"] = {"frames_per_second": wall, "frames_per_cpu_second": cpu,
-                                     "build_us": build_s / n * 1e6, "render_us": render_s / n * 1e6}
+                                     "build_us": build_s / n * 1e6, "render_us": render_s / n * 1e6,
+                                     "cores_used": wall / cpu if cpu else 0.0}
         results[f"pybullet.{name}.frames_per_second"] = pybullet_wall
         results[f"ratio.{name}"] = wall / pybullet_wall
         results[f"step.{name}.steps_per_second"] = step_rate
         results[f"memory.{name}"] = {"buffers_bytes_per_row": buffers_per_row,
                                      "scene_bytes_per_row": scene_bytes(scene) / n, "rss_bytes_per_row": rss_per_row}
-        rows.append((name, f"{wall:,.0f}", f"{cpu:,.0f}", f"{pybullet_wall:,.0f}", f"{wall / pybullet_wall:,.0f}x",
-                     f"{step_rate:,.0f}", f"{build_s / n * 1e6:.1f} + {render_s / n * 1e6:.1f} us",
-                     f"{buffers_per_row / 1024:.0f} + {scene_bytes(scene) / n / 1024:.1f} KiB"))
+        rows.append((name, f"{wall:,.0f}", f"{cpu:,.0f}", f"{wall / cpu:.2f}", f"{pybullet_wall:,.0f}",
+                     f"{wall / pybullet_wall:,.0f}x", f"{step_rate:,.0f}",
+                     f"{build_s / n * 1e6:.1f} + {render_s / n * 1e6:.1f} us",
+                     f"{buffers_per_row / 1024:.0f} + {scene_bytes(scene) / n / 1024:.1f} KiB ({rss_per_row / 1024:.0f})"))
     print(f"N = {n}, {size} x {size}, rgb + depth + segmentation, {args.threads} threads; load average "
           f"{results['load_average'][0]:.2f} on {os.cpu_count()} CPUs")
-    print_table(rows, ["env", "frames/s (wall)", "frames/CPU s", "pybullet frames/s", "ratio", "state steps/s",
-                       "build + render per frame", "memory per row (buffers + scene)"])
+    print_table(rows, ["env", "frames/s (wall)", "frames/CPU s", "cores used", "pybullet frames/s", "ratio",
+                       "state steps/s", "build + render per frame (wall)", "memory per row: buffers + scene (RSS)"])
     for name in ("OcclusionAvoidance", "ViewTracking"):
         rate = results[f"pixels.{name}"]["frames_per_second"]
         print(f"goal >= {GOAL:,} frames/s, {name}: {rate:,.0f} by wall clock "

@@ -105,9 +105,11 @@ def clipped_prism_box(a0, a1, a2, b0, b1, b2, r, near):
     x1 = -math.inf
     y0 = math.inf
     y1 = -math.inf
+    root = math.sqrt(0.5)
+    c1, s1 = 1.0, 0.0
     for k in range(8):
-        c0, s0 = math.cos(0.25 * math.pi * k), math.sin(0.25 * math.pi * k)
-        c1, s1 = math.cos(0.25 * math.pi * (k + 1)), math.sin(0.25 * math.pi * (k + 1))
+        c0, s0 = c1, s1  # cos and sin of k pi / 4, by rotation
+        c1, s1 = root * (c0 - s0), root * (s0 + c0)
         o0 = big * (c0 * e0 + s0 * f0)
         o1 = big * (c0 * e1_ + s0 * f1)
         o2 = big * (c0 * e2_ + s0 * f2)
@@ -387,7 +389,8 @@ def mip_level(footprint, last):
 def plane_hit(x, y, inv_norm, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy, tx_m, ty_m, near,
               far, size0, last, footprint_scale):
     """(depth, cosine, texel index) where the ray (x, y, 1) (of length 1 / ``inv_norm``) meets the plane's front
-    face (normal n, axes ex, ey in the camera frame) within [near, far] and its rectangle, else (far, -1, -1).
+    face (normal n, axes ex, ey in the camera frame) within [near, far] and its rectangle, else (far, -1, the cavity
+    texel: the pyramid's last).
     Scalars only, one division and no branches: a loop of it over a row of pixels vectorises."""
     nd = x * n0 + y * n1 + n2
     inv = 1.0 / nd
@@ -405,16 +408,16 @@ def plane_hit(x, y, inv_norm, visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1,
     # TinyRenderer reads the image bottom up)
     total = 2 * size0 * size0
     k = total - (total >> level) + ((-1 - np.int64(v)) & (size - 1)) * size + (np.int64(u) & (size - 1))
-    return (t if hit else far), (-nd * inv_norm if hit else -1.0), (k if hit else -1)
+    return (t if hit else far), (-nd * inv_norm if hit else -1.0), (k if hit else total - 1)
 
 
 @kernel(error_model="numpy")
 def draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, half, tiles, texture, fx,
-               cavity, ambient, diffuse, want_rgb, rgb, row, zbuf, zrow, seg, srow, albedo, cosine):
+               ambient, diffuse, want_rgb, rgb, row, zbuf, zrow, seg, srow, albedo, cosine):
     """Background of one image: the plane's texture where a ray meets its front face within [near, far] and its
-    rectangle, else the cavity colour (unlit) at depth ``far``. ``inv_norm`` (H, W): 1 / |ray| of each pixel. With
-    ``albedo`` (H, W, 3) and ``cosine`` (H, W) of the image's size, the unshaded colour (in [0, 255]) and the
-    cosine (-1: unlit) are stored as well.
+    rectangle, else the cavity colour (unlit; the pyramid's last texel) at depth ``far``. ``inv_norm`` (H, W):
+    1 / |ray| of each pixel. With ``albedo`` (H, W, 3) and ``cosine`` (H, W) of the image's size, the unshaded
+    colour (in [0, 255]) and the cosine (-1: unlit) are stored as well.
 
     The texel is read from the mip level whose texels match the pixel's footprint on the plane (t |d|^2 /
     |n . d| / f metres). Each image row is done in two passes: the geometry of every pixel, without branches (it
@@ -431,7 +434,6 @@ def draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, 
     last = texture.sizes.shape[0] - 1
     size0 = texture.sizes[0]
     packed = texture.packed
-    c0, c1, c2 = shade(255.0 * cavity[0]), shade(255.0 * cavity[1]), shade(255.0 * cavity[2])
     depth_row = np.empty(width)
     cos_row = np.empty(width)
     texel_row = np.empty(width, dtype=np.int64)
@@ -452,25 +454,21 @@ def draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, 
                 depth_row[j], cos_row[j], texel_row[j] = plane_hit(
                     xs[j], y, inv_norm[i, j], visible, num, n0, n1, n2, ex0, ex1, ex2, ey0, ey1, ey2, ox, oy, hx, hy,
                     tx_m, ty_m, near, far, size0, last, footprint_scale)
-        for j in range(lo, hi + 1):
-            k = texel_row[j]
+        for j in range(lo, hi + 1):  # simple loops: each vectorises
             zbuf[zrow, i, j, 0] = depth_row[j]
+        for j in range(lo, hi + 1):
             seg[srow, i, j, 0] = 0
-            if want_rgb:
-                if k >= 0:
-                    # one read of the packed texel; the light in 8-bit fixed point
-                    texel = np.int64(packed[k])
-                    gain = np.int64((ambient + diffuse * cos_row[j]) * 256.0 + 0.5)
-                    rgb[row, i, j, 0] = np.uint8(min(((texel & 255) * gain + 128) >> 8, 255))
-                    rgb[row, i, j, 1] = np.uint8(min((((texel >> 8) & 255) * gain + 128) >> 8, 255))
-                    rgb[row, i, j, 2] = np.uint8(min((((texel >> 16) & 255) * gain + 128) >> 8, 255))
-                else:
-                    rgb[row, i, j, 0] = c0
-                    rgb[row, i, j, 1] = c1
-                    rgb[row, i, j, 2] = c2
+        if want_rgb:
+            for j in range(lo, hi + 1):
+                # one read of the packed texel; the light in 8-bit fixed point (the cavity is unlit)
+                texel = np.int64(packed[texel_row[j]])
+                c = cos_row[j]
+                gain = np.int64((ambient + diffuse * c) * 256.0 + 0.5) if c >= 0.0 else np.int64(256)
+                rgb[row, i, j, 0] = np.uint8(min(((texel & 255) * gain + 128) >> 8, 255))
+                rgb[row, i, j, 1] = np.uint8(min((((texel >> 8) & 255) * gain + 128) >> 8, 255))
+                rgb[row, i, j, 2] = np.uint8(min((((texel >> 16) & 255) * gain + 128) >> 8, 255))
         if keep:
             for j in range(lo, hi + 1):
-                k = texel_row[j]
                 for ch in range(3):
-                    albedo[i, j, ch] = 255.0 * texture.texels[k, ch] if k >= 0 else 255.0 * cavity[ch]
+                    albedo[i, j, ch] = 255.0 * texture.texels[texel_row[j], ch]
                 cosine[i, j] = cos_row[j]

@@ -57,8 +57,8 @@ PlaneArgs = namedtuple("PlaneArgs", ["kind", "origin", "axis_x", "axis_y", "norm
 #: (L,) of each level.
 TextureArgs = namedtuple("TextureArgs", ["texels", "packed", "offsets", "sizes"])
 #: Light and noise per row: ambient (N,), diffuse (N,), noise seeds (N,) uint64, noise std (0-255 units),
-#: the cavity colour (3,) in [0, 1], tan of the circular field of view's half-angle (0: none).
-ShadeArgs = namedtuple("ShadeArgs", ["ambient", "diffuse", "seeds", "noise_std", "cavity", "fov_tan"])
+#: tan of the circular field of view's half-angle (0: none).
+ShadeArgs = namedtuple("ShadeArgs", ["ambient", "diffuse", "seeds", "noise_std", "fov_tan"])
 #: Output buffers (N, H, W, 3) uint8, (N, H, W, 1) float32, (N, H, W, 1) uint8 and whether each is written
 #: (an unused one may be a (1, 1, 1, k) placeholder).
 OutputArgs = namedtuple("OutputArgs", ["rgb", "depth", "segmentation", "want_rgb", "want_depth",
@@ -236,7 +236,7 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
         else:
             visible = plane_in_camera(plane, R, p, o, ex, ey, nrm)
             draw_plane(xs, ys, distorted, rays, inv_norm, spans, near, far, visible, o, ex, ey, nrm, plane.half,
-                       plane.tiles_per_metre, texture, K[0, 0], shade_args.cavity, ambient, diffuse, want_rgb, rgb, row,
+                       plane.tiles_per_metre, texture, K[0, 0], ambient, diffuse, want_rgb, rgb, row,
                        zbuf, zrow, seg, srow, no_store, no_store[:, :, 0])
             zero_outside(spans, width, want_rgb, rgb, row, zbuf, zrow, seg, srow)
         fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
@@ -286,8 +286,8 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
 
 
 @kernel(nogil=True, error_model="numpy")
-def render_background(K, near, far, width, height, fov_tan, plane, texture, cavity, ambient, diffuse, rgb, depth,
-                      albedo, cosine):
+def render_background(K, near, far, width, height, fov_tan, plane, texture, ambient, diffuse, rgb, depth, albedo,
+                      cosine):
     """The image of a plane fixed in the frame of an undistorted camera with intrinsics K: rgb (H, W, 3) uint8 under
     the light (ambient, diffuse), depth (H, W, 1), and the unshaded albedo (H, W, 3) and cosine (H, W) for other
     lights; 0 outside the circular field of view (``fov_tan`` > 0)."""
@@ -307,5 +307,5 @@ def render_background(K, near, far, width, height, fov_tan, plane, texture, cavi
     albedo[:] = 0.0
     cosine[:] = -1.0
     draw_plane(xs, ys, False, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, plane.half, plane.tiles_per_metre,
-               texture, K[0, 0], cavity, ambient, diffuse, True, rgb4, 0, depth4, 0, seg4, 0, albedo, cosine)
+               texture, K[0, 0], ambient, diffuse, True, rgb4, 0, depth4, 0, seg4, 0, albedo, cosine)
     zero_outside(spans, width, True, rgb4, 0, depth4, 0, seg4, 0)

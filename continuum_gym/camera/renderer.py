@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from continuum_gym.camera.model import Cameras
-from continuum_gym.camera.palette import CAVITY
 from continuum_gym.camera.randomisation import NOMINAL_AMBIENT, NOMINAL_DIFFUSE, Randomisation
 from continuum_gym.camera.raster import (
     PLANE_CAMERA,
@@ -41,7 +40,6 @@ __all__ = ["Renderer", "Frames", "MODALITIES", "allocate_frames"]
 
 #: The modalities, in the order of ``Frames``.
 MODALITIES = ("rgb", "depth", "segmentation")
-_CAVITY = np.asarray(CAVITY, dtype=np.float64) / 255.0
 _NO_TEXTURE = MipPyramid(np.zeros((1, 1, 3), dtype=np.uint8), min_size=1)
 _NO_CACHE = CacheArgs(np.zeros((1, 1, 3), np.uint8), np.zeros((1, 1, 1), np.float32), np.zeros((1, 1, 3), np.float32),
                       np.zeros((1, 1), np.float32), NOMINAL_AMBIENT, NOMINAL_DIFFUSE, np.zeros(0, dtype=np.uint8))
@@ -135,7 +133,7 @@ class Renderer:
                              buffers["segmentation"] if "segmentation" in modalities else _placeholder(np.uint8, 1),
                              "rgb" in modalities, "depth" in modalities, "segmentation" in modalities)
         plane, texture = self._plane(spec.plane)
-        shade = ShadeArgs(draws.ambient, draws.diffuse, draws.seeds, draws.noise_std, _CAVITY,
+        shade = ShadeArgs(draws.ambient, draws.diffuse, draws.seeds, draws.noise_std,
                           float(np.tan(spec.fov_half_angle)) if spec.fov_half_angle is not None else 0.0)
         camera_args = CameraArgs(cameras.intrinsics, cameras.poses, cameras.k1, cameras.near, cameras.far, w, h)
         tubes = scene.tubes
@@ -177,7 +175,7 @@ class Renderer:
             rgb, depth = np.empty((h, w, 3), np.uint8), np.empty((h, w, 1), np.float32)
             albedo, cosine = np.empty((h, w, 3), np.float32), np.empty((h, w), np.float32)
             render_background(np.ascontiguousarray(K), cameras.near, cameras.far, w, h, fov_tan, plane, texture,
-                              _CAVITY, NOMINAL_AMBIENT, NOMINAL_DIFFUSE, rgb, depth, albedo, cosine)
+                              NOMINAL_AMBIENT, NOMINAL_DIFFUSE, rgb, depth, albedo, cosine)
             if len(self._backgrounds) >= 8:
                 self._backgrounds.clear()
                 self._textures.clear()

@@ -10,6 +10,7 @@ import functools
 
 import numpy as np
 
+from continuum_gym.camera.palette import CAVITY
 from continuum_gym.validation import integer, positive
 
 __all__ = ["tissue_texture", "cached_texture", "mip_pyramid", "MipPyramid"]
@@ -71,6 +72,9 @@ class MipPyramid:
         texels: float32 (2 size^2, 3), colours in [0, 1], level after level, rows first.
         offsets: int64 (levels,), the first texel of each level: 2 size^2 - (2 size^2 >> level).
         packed: uint32 (2 size^2,), the texels as 8-bit r | g << 8 | b << 16 (one read per texel).
+
+    The last texel (in the padding after the smallest level) is the cavity colour (``palette.CAVITY``), which the
+    sampler reads for rays that miss the plane.
         sizes: int64 (levels,), the side of each level (texels), a power of 2.
     """
 
@@ -93,6 +97,8 @@ class MipPyramid:
         self.texels = np.zeros((total, 3), dtype=np.float32)
         for start, t in zip(self.offsets, levels):
             self.texels[start:start + t.shape[0] ** 2] = t.reshape(-1, 3)
+        # the last slot (never part of a level) holds the cavity's colour: what a ray that misses the plane shows
+        self.texels[-1] = np.asarray(CAVITY) / 255.0
         rgb = np.clip(np.rint(self.texels * 255.0), 0, 255).astype(np.uint32)
         self.packed = np.ascontiguousarray(rgb[:, 0] | (rgb[:, 1] << 8) | (rgb[:, 2] << 16))
 
