@@ -107,8 +107,8 @@ def clipped_prism_box(a0, a1, a2, b0, b1, b2, r, near):
     y1 = -math.inf
     root = math.sqrt(0.5)
     c1, s1 = 1.0, 0.0
-    for k in range(8):
-        c0, s0 = c1, s1  # cos and sin of k pi / 4, by rotation
+    for _ in range(8):
+        c0, s0 = c1, s1  # cos and sin of k pi / 4 for the k-th corner, by rotation
         c1, s1 = root * (c0 - s0), root * (s0 + c0)
         o0 = big * (c0 * e0 + s0 * f0)
         o1 = big * (c0 * e1_ + s0 * f1)
