@@ -161,7 +161,8 @@ def main(argv=None) -> int:
         rows.append((name, f"{wall:,.0f}", f"{cpu:,.0f}", f"{wall / cpu:.2f}", f"{pybullet_wall:,.0f}",
                      f"{wall / pybullet_wall:,.0f}x", f"{step_rate:,.0f}",
                      f"{build_s / n * 1e6:.1f} + {render_s / n * 1e6:.1f} us",
-                     f"{buffers_per_row / 1024:.0f} + {scene_bytes(scene) / n / 1024:.1f} KiB ({rss_per_row / 1024:.0f})"))
+                     f"{buffers_per_row / 1024:.0f} + {scene_bytes(scene) / n / 1024:.1f} KiB "
+                     f"({rss_per_row / 1024:.0f})"))
     print(f"N = {n}, {size} x {size}, rgb + depth + segmentation, {args.threads} threads; load average "
           f"{results['load_average'][0]:.2f} on {os.cpu_count()} CPUs")
     print_table(rows, ["env", "frames/s (wall)", "frames/CPU s", "cores used", "pybullet frames/s", "ratio",

@@ -37,6 +37,7 @@ from continuum_gym.camera.scene import Scene, TexturedPlane, Tubes, View
 from continuum_gym.camera.texture import mip_pyramid
 from continuum_gym.geometry.lens_cone import LensCone, lens_to_world_direction_cs, resolve_cone
 from continuum_gym.robots.compiled import kernel
+from continuum_gym.robots.mbcr import MultiBackboneRobot
 from continuum_gym.robots.mbcr_kernels import all_finite, backbone_kernel, make_workspace
 from continuum_gym.validation import as_finite, boolean, integer, positive
 
@@ -134,8 +135,8 @@ def occlusion_tubes(Q, G, robot, d_o, alpha, model, n_per_segment, A, B, U, p_ca
     return True
 
 
-def occlusion_scene(robot: object, cone: LensCone | None, q: ArrayLike, gamma: ArrayLike, *, width: int = 64,
-                    height: int | None = None, tissue: bool = True, tissue_distance: float = 0.065,
+def occlusion_scene(robot: MultiBackboneRobot, cone: LensCone | None, q: ArrayLike, gamma: ArrayLike, *,
+                    width: int = 64, height: int | None = None, tissue: bool = True, tissue_distance: float = 0.065,
                     tissue_half_size: float = 0.05, robot_radius: float = 0.0015, shaft_radius: float = 0.002,
                     n_per_segment: int = 8, circular_fov: bool = True, faceted: bool = True, near: float = 1e-3,
                     far: float = 0.3, texture_seed: int = 0) -> Scene:
@@ -158,8 +159,6 @@ def occlusion_scene(robot: object, cone: LensCone | None, q: ArrayLike, gamma: A
     Returns:
         A ``Scene`` with one view, ``"endoscope"``. Group 0 is the robot, group 1 the shaft.
     """
-    from continuum_gym.robots import MultiBackboneRobot
-
     if not isinstance(robot, MultiBackboneRobot):
         raise ValueError(f"robot must be a MultiBackboneRobot; got {type(robot).__name__}")
     cone = resolve_cone(cone)
@@ -176,8 +175,9 @@ def occlusion_scene(robot: object, cone: LensCone | None, q: ArrayLike, gamma: A
     shaft = positive(shaft_radius, "shaft_radius", "m")
     d = positive(tissue_distance, "tissue_distance", "m")
     half = positive(tissue_half_size, "tissue_half_size", "m")
-    tissue, circular_fov, faceted = (boolean(v, name) for v, name in ((tissue, "tissue"), (circular_fov, "circular_fov"),
-                                                                       (faceted, "faceted")))
+    tissue = boolean(tissue, "tissue")
+    circular_fov = boolean(circular_fov, "circular_fov")
+    faceted = boolean(faceted, "faceted")
     K = intrinsics(width, height, 2.0 * cone.beta)
     segments = robot.n_segments
     count = occlusion_tube_count(segments, n_per_segment)

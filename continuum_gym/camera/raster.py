@@ -281,8 +281,8 @@ def render_rows(start, stop, camera, tubes, visible_groups, plane, texture, shad
             for i in range(height):
                 for j in range(spans[i, 0], spans[i, 1] + 1):
                     for ch in range(3):
-                        value = rgb[row, i, j, ch] + shade_args.noise_std * gaussian_like(seed, (i * width + j) * 3 + ch)
-                        rgb[row, i, j, ch] = shade(value)
+                        noise = shade_args.noise_std * gaussian_like(seed, (i * width + j) * 3 + ch)
+                        rgb[row, i, j, ch] = shade(rgb[row, i, j, ch] + noise)
 
 
 @kernel(nogil=True, error_model="numpy")
@@ -306,6 +306,7 @@ def render_background(K, near, far, width, height, fov_tan, plane, texture, ambi
     seg4 = np.empty((1, height, width, 1), dtype=np.uint8)
     albedo[:] = 0.0
     cosine[:] = -1.0
-    draw_plane(xs, ys, False, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, plane.half, plane.tiles_per_metre,
-               texture, K[0, 0], ambient, diffuse, True, rgb4, 0, depth4, 0, seg4, 0, albedo, cosine)
+    draw_plane(xs, ys, False, rays, inv_norm, spans, near, far, visible, o, ex, ey, n, plane.half,
+               plane.tiles_per_metre, texture, K[0, 0], ambient, diffuse, True, rgb4, 0, depth4, 0, seg4, 0, albedo,
+               cosine)
     zero_outside(spans, width, True, rgb4, 0, depth4, 0, seg4, 0)

@@ -32,8 +32,10 @@ from continuum_gym.camera.palette import COLORS
 from continuum_gym.camera.primitives import FLAT, OPEN, ROUND
 from continuum_gym.camera.scene import Scene, TexturedPlane, Tubes, View
 from continuum_gym.camera.texture import mip_pyramid
+from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots.compiled import kernel
-from continuum_gym.robots.davinci import davinci_pose, stem_rotation
+from continuum_gym.robots.davinci import DaVinciEndoscope, davinci_pose, stem_rotation
+from continuum_gym.robots.endoscope import ContinuumEndoscope
 from continuum_gym.robots.endoscope_kernels import backbone_batch, kinematics_batch
 from continuum_gym.robots.mbcr_kernels import all_finite
 from continuum_gym.validation import as_finite, boolean, integer, positive
@@ -89,7 +91,7 @@ def view_tracking_tubes(Q, Q_dv, robot, dv, n_per_segment, A, B, U, p_cam, R_cam
     return True
 
 
-def view_tracking_scene(endoscope: object, davinci: object, frustum: object, q: ArrayLike,
+def view_tracking_scene(endoscope: ContinuumEndoscope, davinci: DaVinciEndoscope, frustum: Frustum, q: ArrayLike,
                         davinci_configuration: ArrayLike, *, width: int = 64, height: int | None = None,
                         endoscope_radius: float = 0.003, davinci_radius: float = 0.004, n_per_segment: int = 6,
                         tissue_height: float | None = None, tissue_half_size: float = 1.0, show_other: bool = False,
@@ -109,15 +111,10 @@ def view_tracking_scene(endoscope: object, davinci: object, frustum: object, q: 
         faceted: tubes with the silhouettes of the pybullet meshes' prisms; False: round tubes.
         near, far: clip distances of both cameras (m); texture_seed: the tissue texture's seed.
     """
-    from continuum_gym.geometry.frustum import Frustum
-    from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
-
     for name, value, cls in (("endoscope", endoscope, ContinuumEndoscope), ("davinci", davinci, DaVinciEndoscope),
                              ("frustum", frustum, Frustum)):
         if not isinstance(value, cls):
             raise ValueError(f"{name} must be a {cls.__name__}; got {type(value).__name__}")
-    assert isinstance(endoscope, ContinuumEndoscope) and isinstance(davinci, DaVinciEndoscope) \
-        and isinstance(frustum, Frustum)
     q = as_finite(q, (6,), "q")
     if q.ndim != 2:
         raise ValueError(f"q must have shape (N, 6); got {q.shape}")
