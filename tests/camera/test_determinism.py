@@ -3,9 +3,12 @@ images draw nothing from the generator."""
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
+import continuum_gym.camera.renderer as renderer_module
 from continuum_gym.camera import Randomisation, Renderer, occlusion_scene, view_tracking_scene
 from continuum_gym.geometry.frustum import Frustum
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope, MultiBackboneRobot
@@ -35,6 +38,32 @@ def test_threads_change_no_bit(scenes, case):
     for modality in ("rgb", "depth", "segmentation"):
         np.testing.assert_array_equal(getattr(one, modality), getattr(two, modality))
     np.testing.assert_array_equal(one.cameras.k1, two.cameras.k1)
+
+
+def test_rows_rendered_on_two_threads_at_once_are_the_same(scenes, monkeypatch):
+    """The kernel on two threads at the same time (each half of the rows from its own thread, both started before
+    either is joined) writes the bits one call writes: its scratch is per call, its inputs read-only."""
+    scene, view = scenes["occlusion"]
+    one = Renderer(threads=1).render(scene, view, randomisation=RANDOM, rng=np.random.default_rng(5))
+    used = []
+
+    def halves(entry, args, num_rows, threads, block):
+        def run(start, stop):
+            used.append(threading.get_ident())
+            entry(start, stop, *args)
+
+        workers = [threading.Thread(target=run, args=(0, num_rows // 2)),
+                   threading.Thread(target=run, args=(num_rows // 2, num_rows))]
+        for worker in workers:
+            worker.start()
+        for worker in workers:
+            worker.join()
+
+    monkeypatch.setattr(renderer_module, "run_blocks", halves)
+    two = Renderer(threads=2).render(scene, view, randomisation=RANDOM, rng=np.random.default_rng(5))
+    assert len(set(used)) == 2
+    for modality in ("rgb", "depth", "segmentation"):
+        np.testing.assert_array_equal(getattr(one, modality), getattr(two, modality))
 
 
 def test_the_same_seed_gives_the_same_images_and_another_seed_others(scenes):
