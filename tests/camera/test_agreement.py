@@ -133,3 +133,31 @@ def test_view_tracking_agrees(view_tracking_states):
     assert len(per_state) >= 20  # the continuum endoscope is in the da Vinci's view in some states
     assert aggregate >= IOU_AGGREGATE_MIN
     assert np.median(per_state) >= IOU_AGGREGATE_MIN
+
+
+@pytest.mark.parametrize("lens_model", ["literal", "physical"])
+def test_the_endoscope_cameras_are_the_pybullet_scenes(occlusion_states, lens_model):
+    """Every row's camera pose is the pybullet scene's ``camera_pose``, for both lens models."""
+    from continuum_gym.geometry.lens_cone import LensCone
+
+    core, q, gamma = occlusion_states
+    cone = LensCone(lens_model=lens_model)
+    cameras = occlusion_scene(core.robot, cone, q[:20], gamma[:20], width=SIZE).views["endoscope"].cameras
+    with OcclusionScene(robot=core.robot, cone=cone, tissue=None) as scene:
+        for k in range(20):
+            scene.update(q[k], gamma[k])
+            p, R = scene.camera_pose("endoscope")
+            np.testing.assert_allclose(cameras.positions[k], p, atol=1e-15)
+            np.testing.assert_allclose(cameras.rotations[k], R, atol=1e-15)
+
+
+def test_the_view_tracking_cameras_are_the_pybullet_scenes(view_tracking_states):
+    core, q, q_dv = view_tracking_states
+    views = view_tracking_scene(core.robot, core.davinci, core.frustum, q[:20], q_dv[:20], width=SIZE).views
+    with ViewTrackingScene.from_core(core) as scene:
+        for k in range(20):
+            scene.update(q[k], q_dv[k])
+            for view in ("endoscope", "davinci"):
+                p, R = scene.camera_pose(view)
+                np.testing.assert_allclose(views[view].cameras.positions[k], p, atol=1e-15)
+                np.testing.assert_allclose(views[view].cameras.rotations[k], R, atol=1e-15)
