@@ -22,6 +22,7 @@ LAYERS = {
     "continuum_gym.plugins": 0,
     "continuum_gym.robots": 1,
     "continuum_gym.geometry": 2,
+    "continuum_gym.camera": 2,  # the batched renderer: robots, geometry and validation only (no pybullet)
     "continuum_gym.baselines": 3,
     "continuum_gym.envs": 4,
     "continuum_gym.registry": 5,
@@ -123,7 +124,8 @@ def test_no_private_name_crosses_modules():
     assert crossing == []
 
 
-@pytest.mark.parametrize("layer", ["continuum_gym.robots", "continuum_gym.geometry", "continuum_gym.baselines"])
+@pytest.mark.parametrize("layer", ["continuum_gym.robots", "continuum_gym.geometry", "continuum_gym.camera",
+                                   "continuum_gym.baselines"])
 def test_the_layers_below_the_environments_need_no_rl_framework(layer):
     found = [f"{name}:{line} imports {target}" for name, path in MODULES.items()
              if name == layer or name.startswith(layer + ".")

@@ -10,7 +10,8 @@ the viewport maps NDC x in [-1, 1] to [0, W] and a pixel is covered when its *in
 triangle, so column j samples x_ndc = 2 j / W - 1; the image is flipped vertically before it is returned,
 so row i (0 = top) samples y_ndc = 2 (H - 1 - i) / H - 1. ``pixel_rays`` uses exactly these samples.
 
-pybullet is imported lazily (inside the functions that need it).
+pybullet is imported lazily (inside the functions that need it). ``look_at_frame``, ``pixel_rays``, ``pixel_angles``
+and ``fov_mask`` live in ``continuum_gym.camera.model`` (the batched renderer's camera model) and are re-exported.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from continuum_gym.camera.model import fov_mask, look_at_frame, pixel_angles, pixel_rays
 
 __all__ = [
     "camera_matrices", "view_matrix", "projection_matrix", "view_matrix_from_frame", "look_at_frame",
@@ -72,58 +75,6 @@ def view_matrix_from_frame(p: ArrayLike, R: ArrayLike) -> np.ndarray:
     V[:3, :3] = axes
     V[:3, 3] = -axes @ p
     return V
-
-
-def look_at_frame(eye: ArrayLike, target: ArrayLike,
-                  up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
-    """Camera frame (p, R) at ``eye`` looking at ``target`` with image-up as close to ``up`` as possible."""
-    eye = np.asarray(eye, dtype=np.float64).reshape(3)
-    z = np.asarray(target, dtype=np.float64).reshape(3) - eye
-    n = np.linalg.norm(z)
-    if n < 1e-12:
-        raise ValueError("eye and target coincide")
-    z /= n
-    up = np.asarray(up, dtype=np.float64).reshape(3)
-    x = np.cross(z, up)  # image right = forward x up
-    if np.linalg.norm(x) < 1e-9:
-        x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)  # image down
-    return eye, np.column_stack([x, y, z])
-
-
-def pixel_rays(width: int, height: int, fov_y: float) -> np.ndarray:
-    """Unnormalised ray directions (H, W, 3) in the camera frame of every pixel sample (x right, y down, z = 1)."""
-    t = math.tan(0.5 * fov_y)
-    x_ndc = 2.0 * np.arange(width) / width - 1.0
-    y_ndc = 2.0 * (height - 1 - np.arange(height)) / height - 1.0
-    rays = np.empty((height, width, 3))
-    rays[..., 0] = (x_ndc * t * width / height)[None, :]
-    rays[..., 1] = (-y_ndc * t)[:, None]
-    rays[..., 2] = 1.0
-    return rays
-
-
-def pixel_angles(width: int, height: int, fov_y: float) -> np.ndarray:
-    """Angle (rad, (H, W)) between each pixel's ray and the optical axis."""
-    rays = pixel_rays(width, height, fov_y)
-    return np.arctan(np.hypot(rays[..., 0], rays[..., 1]))
-
-
-_FOV_MASKS: dict = {}
-
-
-def fov_mask(width: int, height: int, fov_y: float, half_angle: float) -> np.ndarray:
-    """Boolean (H, W): pixels whose ray is within ``half_angle`` (rad) of the optical axis (cached, read-only)."""
-    key = (int(width), int(height), float(fov_y), float(half_angle))
-    mask = _FOV_MASKS.get(key)
-    if mask is None:
-        mask = pixel_angles(width, height, fov_y) <= half_angle
-        mask.flags.writeable = False
-        if len(_FOV_MASKS) > 64:
-            _FOV_MASKS.clear()
-        _FOV_MASKS[key] = mask
-    return mask
 
 
 def quaternion_from_matrix(R: ArrayLike) -> np.ndarray:

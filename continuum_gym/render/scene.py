@@ -28,12 +28,14 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Collection
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from continuum_gym.camera.palette import CAVITY, COLORS
 from continuum_gym.render.camera import camera_matrices, look_at_frame
 from continuum_gym.render.meshes import E3, unit
 from continuum_gym.render.textures import bmp_bytes, cached_texture
@@ -67,6 +69,10 @@ class Scene:
     cameras: tuple[str, ...]
     external_camera: dict[str, Any]
     _external: tuple[np.ndarray, np.ndarray]
+    # Set by every scene's constructor: the endoscope cameras' vertical field of view (rad) and clip distances (m).
+    fov_y: float
+    near: float
+    far: float
 
     def __init__(self, texture_seed: int = 0, texture_size: int = 512, texture_features: float = 1.0) -> None:
         p, bullet_client = import_pybullet()
@@ -82,6 +88,8 @@ class Scene:
         self._texture_features = float(texture_features)
         self._texture = None
         self._lut = np.zeros(1, dtype=bool)
+        self._last_depth = np.zeros((0, 0), dtype=np.float32)
+        self._last_clip = (1e-3, 0.3)
         #: bounding spheres of the bodies that may be culled: (body ids, centres (k, 3), radii (k,))
         self._spheres: tuple[list[int], np.ndarray, np.ndarray] = ([], np.zeros((0, 3)), np.zeros(0))
         self.closed = False
@@ -190,7 +198,20 @@ class Scene:
         rgba = np.asarray(out[2], dtype=np.uint8).reshape(height, width, 4)
         seg = np.asarray(out[4]).reshape(height, width) if segmentation else None
         self._last_depth = np.asarray(out[3], dtype=np.float32).reshape(height, width)
+        self._last_clip = (float(near), float(far))
         return rgba, seg
+
+    def last_depth(self) -> np.ndarray:
+        """Depth (height, width) float32 of the last image the scene rendered, in m along the optical axis.
+
+        From pybullet's depth buffer z in [0, 1]: far near / (far - (far - near) z), so ``far`` where nothing was
+        hit. Of the last render call: ``render("endoscope")`` with a cached background renders the robot alone.
+        """
+        self._check_open()
+        if self._last_depth.size == 0:
+            raise ValueError("no image rendered yet: call render() first")
+        near, far = self._last_clip
+        return (far * near / (far - (far - near) * self._last_depth.astype(np.float64))).astype(np.float32)
 
     def _external_image(self, width, height, groups):
         """External view: light from behind the viewer, a dark gradient where no body is hit."""
@@ -249,6 +270,30 @@ class Scene:
             ext["fov"] = number(fov, "fov", low=0.0, high=180.0, low_open=True, high_open=True, unit="deg")
         self._external = external_frame(ext["target"], ext["distance"], ext["azimuth"], ext["elevation"])
         self.external_camera = ext
+
+    def camera_pose(self, camera: str = "endoscope") -> tuple[np.ndarray, np.ndarray]:
+        """(p, R) of ``camera`` in {w}; every scene class defines it."""
+        raise NotImplementedError
+
+    def camera_image(self, camera: str, groups: Collection[str], width: int = 128,
+                     height: int = 128) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """An endoscope camera's image of exactly the body ``groups`` (names of ``body_ids``), for comparisons
+        with another renderer: (rgb (H, W, 3) uint8, body id of each pixel (H, W) int, -1 where nothing is
+        hit, depth (H, W) float32 in m along the optical axis, ``far`` where nothing is hit).
+
+        Unlike ``render``, nothing is culled and no background is filled in or cached.
+        """
+        if camera not in self.cameras or camera == "external":
+            raise ValueError(f"camera must be one of {[c for c in self.cameras if c != 'external']}; got {camera!r}")
+        unknown = set(groups) - set(self._groups)
+        if unknown:
+            raise ValueError(f"groups must be among {sorted(self._groups)}; got {sorted(unknown)}")
+        p_cam, R_cam = self.camera_pose(camera)
+        self._show(set(groups))
+        rgba, seg = self._render(p_cam, R_cam, self.fov_y, width, height, self.near, self.far, -R_cam[:, 2],
+                                 segmentation=True)
+        ids = np.where(seg >= 0, seg & 0xFFFFFF, -1)
+        return rgba[..., :3].copy(), ids, self.last_depth()
 
     def _robot_mask(self, seg):
         seg = np.where(seg >= 0, seg & 0xFFFFFF, -1)
@@ -315,22 +360,3 @@ def external_frame(target: ArrayLike, distance: float, azimuth_deg: float,
     target = np.asarray(target, dtype=np.float64)
     eye = target + distance * np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
     return look_at_frame(eye, target, E3)
-
-
-#: colour of rays that hit nothing in an endoscope image (an unlit cavity)
-CAVITY = (14, 8, 8)
-
-
-COLORS = {
-    "straight": (0.55, 0.57, 0.62, 1.0),
-    "segments": ((0.80, 0.80, 0.84, 1.0), (0.62, 0.78, 0.90, 1.0), (0.90, 0.82, 0.55, 1.0)),
-    "disk": (0.25, 0.27, 0.30, 1.0),
-    "shaft": (0.12, 0.12, 0.14, 1.0),
-    "lens": (0.20, 0.45, 0.85, 1.0),
-    "cone": (1.0, 0.85, 0.10, 1.0),
-    "endoscope": ((0.35, 0.75, 0.45, 1.0), (0.25, 0.45, 0.30, 1.0), (0.30, 0.65, 0.80, 1.0)),
-    "camera_head": (0.10, 0.10, 0.12, 1.0),
-    "davinci": (0.55, 0.58, 0.66, 1.0),
-    "frustum_endoscope": (0.20, 0.95, 0.35, 1.0),
-    "frustum_davinci": (0.25, 0.55, 1.00, 1.0),
-}
