@@ -10,7 +10,7 @@ same env from it (``continuum_gym.config_files``; loaded on first use).
 
 __version__ = "0.2.0"
 
-from continuum_gym.envs.registration import ENV_IDS, register_envs  # noqa: E402
+from continuum_gym.envs.spec import ENV_IDS, register_envs  # noqa: E402
 
 register_envs()
 

@@ -83,7 +83,6 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
 
     import continuum_gym  # noqa: F401  (registers the ids)
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.plugins import load_object as load
 
     spec = get_spec(env_id)
     config = spec.config_class
@@ -97,8 +96,10 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     for num_threads in (1, 2):
         _step_twice(gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads))
         report("done")
-    for part in spec.warm_ups:  # the env's library API, as ``continuum-gym reproduce`` calls it
-        load(part)()
+    from continuum_gym.evaluation.reproduction import warm_ups
+
+    for part in warm_ups(spec.env_id):  # the env's library API, as ``continuum-gym reproduce`` calls it
+        part()
     report("done")
 
 
@@ -172,7 +173,7 @@ def build(out: Path, portable: bool = False, env_ids: list | None = None) -> dic
         environ["NUMBA_CPU_NAME"] = PORTABLE_CPU
     start = time.perf_counter()
     try:
-        codes = _run_workers({env_id: [sys.executable, "-m", "continuum_gym.cli", "precompile", _WORKER_FLAG, env_id]
+        codes = _run_workers({env_id: [sys.executable, "-m", "continuum_gym.precompile", _WORKER_FLAG, env_id]
                               for env_id in env_ids or _env_ids()}, environ, start)
         if any(codes):
             raise RuntimeError(f"continuum-gym precompile: a worker failed (exit codes {codes}); the previous set, "
@@ -286,3 +287,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"continuum-gym precompile: {manifest['kernels']} kernels for CPU '{manifest['cpu']}' in "
           f"{manifest['seconds']:.0f} s -> {out}")
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m continuum_gym.precompile``: the command's worker processes (``continuum-gym precompile`` for users)."""
+    parser = argparse.ArgumentParser(prog="continuum-gym precompile")
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

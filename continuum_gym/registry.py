@@ -135,7 +135,7 @@ def register_controller(name: str, rates: Callable[..., None], *, env: str | Non
     The function is compiled for the documented signature here (``ValueError`` if it does not fit) and
     called once on a test state, which must give a finite command.
     """
-    from continuum_gym.envs.custom import check_controller
+    from continuum_gym.envs.registered import add_controller
     from continuum_gym.envs.spec import get_spec
 
     env = _env(env)
@@ -145,13 +145,10 @@ def register_controller(name: str, rates: Callable[..., None], *, env: str | Non
     values = np.ascontiguousarray(np.asarray(params, dtype=np.float64).reshape(-1))
     if not np.all(np.isfinite(values)):
         raise ValueError(f"params must be finite numbers; got {describe(values)}")
-    if not get_spec(env).controller_module:
-        raise ValueError(f"{env} takes no registered controllers (its EnvSpec names no controller_module)")
-    controller = CustomController(name, env, rates, values, doc, get_spec(env).controller_module)
-    check_controller(controller)
-    CONTROLLERS[env][name] = controller
-    record("controller", env, name, plugins.caller_origin())
-    return controller
+    module = get_spec(env).row_functions().controller
+    if not module:
+        raise ValueError(f"{env} takes no registered controllers (its RowFunctions name no controller module)")
+    return add_controller(name, env, rates, values, doc, module, plugins.caller_origin())
 
 
 def register_reward_term(name: str, fn: Callable[..., Any], *, env: str | None = None, weight: float = 1.0,

@@ -120,7 +120,9 @@ def _stat(spec, name: str, s) -> str:
 
 
 def ordered_rows(spec, table: dict) -> list:
-    base = spec.headline_baseline
+    from continuum_gym.envs.benchmark import benchmark_of
+
+    base = benchmark_of(spec).headline_baseline
     learned = [pattern.format(base=base) for pattern in LEARNED_ORDER]
     packaged = [reference.rpartition(":")[2] for reference in spec.config_class.packaged_controllers]
     rows = [m for m in table if m in spec.baselines or m in packaged]
@@ -131,19 +133,20 @@ def ordered_rows(spec, table: dict) -> list:
 
 
 def env_section(env_id: str, table: dict, meta: dict) -> str:
+    from continuum_gym.envs.benchmark import benchmark_of
     from continuum_gym.envs.spec import get_spec
     from continuum_gym.evaluation.comparison import IMPROVEMENT, TRAINING
     from continuum_gym.evaluation.tables import HEADROOM
 
     spec = get_spec(env_id)
     short = env_id.split("/")[-1].rsplit("-v", 1)[0]
-    metric = spec.metric(spec.headline_metric)
+    metric = spec.metric(benchmark_of(spec).headline_metric)
     metrics = [m.name for m in spec.metrics if m.name in {k for row in table.values() for k in row}]
     direction = "higher is better" if metric.higher_is_better else "lower is better"
     where = next((row[HEADROOM]["on"] for row in table.values() if HEADROOM in row), "-")
     lines = [f"## {env_id}", "",
-             f"Headline metric `{spec.headline_metric}` ({metric.label}, {direction}); headline baseline "
-             f"`{spec.headline_baseline}`; `{HEADROOM}` on the {where}.",
+             f"Headline metric `{benchmark_of(spec).headline_metric}` ({metric.label}, {direction}); headline baseline "
+             f"`{benchmark_of(spec).headline_baseline}`; `{HEADROOM}` on the {where}.",
              "", "| method | algo | seeds | " + " | ".join(metrics) + f" | {HEADROOM} |",
              "|---|---|---|" + "---|" * (len(metrics) + 1)]
     rows = ordered_rows(spec, table)
@@ -153,8 +156,8 @@ def env_section(env_id: str, table: dict, meta: dict) -> str:
         cells.append(f"{row[HEADROOM]['mean']:.2f}" if HEADROOM in row else "-")
         seeds = row.get("n_seeds", 1 if method in spec.baselines else "-")
         lines.append(f"| {method} | {row.get('algo') or '-'} | {seeds} | " + " | ".join(cells) + " |")
-    lines += ["", f"Learned rows: probability of improvement over `{spec.headline_baseline}` (rliable: "
-                  f"P(the row's `{spec.headline_metric}` is {'higher' if metric.higher_is_better else 'lower'} than "
+    lines += ["", f"Learned rows: probability of improvement over `{benchmark_of(spec).headline_baseline}` (rliable: "
+                  f"P(the row's `{benchmark_of(spec).headline_metric}` is {'higher' if metric.higher_is_better else 'lower'} than "
                   "the baseline's on the same test episode), averaged over the non-grid test episodes; 95 % "
                   "stratified-bootstrap CI over episodes and seeds), the budget and the wall-clock of each "
                   "training run:", "",

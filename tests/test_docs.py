@@ -27,8 +27,7 @@ def _examples_on_the_path(monkeypatch) -> None:
 
 def _forget_my_lab() -> None:
     """Forget the example packages (my_lab's variant, my_reach's environment) so that no other test sees them."""
-    from continuum_gym.envs.registration import ENV_IDS
-    from continuum_gym.envs.spec import ENV_SPECS
+    from continuum_gym.envs.spec import ENV_IDS, ENV_SPECS
 
     for name in [m for m in sys.modules if m.split(".")[0] in ("my_lab", "my_reach")]:
         del sys.modules[name]

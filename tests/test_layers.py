@@ -9,6 +9,7 @@ environments imports gymnasium, torch or stable-baselines3.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import networkx as nx
@@ -31,6 +32,15 @@ LAYERS = {
     "continuum_gym.agents": 6,
     "continuum_gym.evaluation": 6,
     "continuum_gym.render": 6,
+    # the pybullet scenes draw robots from their kinematics (the core is read by attribute, never imported): below
+    # the environments, which name their scene in their spec; the command that records episodes stays above
+    "continuum_gym.render.scene": 3,
+    "continuum_gym.render.occlusion_scene": 3,
+    "continuum_gym.render.view_scene": 3,
+    "continuum_gym.render.meshes": 3,
+    "continuum_gym.render.camera": 3,
+    "continuum_gym.render.textures": 3,
+    "continuum_gym.render.occlusion": 3,
     "continuum_gym.cli": 7,
     "continuum_gym": 4,  # the package root registers the ids (envs.registration) and nothing else
 }
@@ -83,11 +93,25 @@ def _owner(module: str) -> str | None:
     return module or None
 
 
-def _graph() -> nx.DiGraph:
+#: A "module:name" reference (or a bare module path) to one of the package's modules, in a string constant.
+REFERENCE = re.compile(r"^(continuum_gym(?:\.\w+)+)(?::[\w.]+)?$")
+
+
+def _references(name: str, path: Path):
+    """(module, (), line) of every string constant that names a module of the package: "module:name" references
+    (an entry point, a row declaration, a scene) are imported when used, so they are dependencies as imports are."""
+    for value, line in _strings(ast.parse(path.read_text())):
+        match = REFERENCE.match(value)
+        if match and _owner(match.group(1)):
+            yield match.group(1), (), line
+
+
+def _graph(references: bool = True) -> nx.DiGraph:
     graph = nx.DiGraph()
     for name, path in MODULES.items():
         graph.add_node(name)
-        for target, _, line in _imports(name, path):
+        edges = list(_imports(name, path)) + (list(_references(name, path)) if references else [])
+        for target, _, line in edges:
             owner = _owner(target) if target.startswith("continuum_gym") else None
             if owner and owner not in (name, "continuum_gym"):  # the root is imported before any submodule
                 graph.add_edge(name, owner, line=line)
@@ -101,7 +125,7 @@ def test_the_layer_map_covers_every_module():
 
 
 def test_no_import_cycle_between_modules():
-    cycles = sorted(nx.simple_cycles(_graph()), key=len)
+    cycles = sorted(nx.simple_cycles(_graph(references=False)), key=len)
     assert cycles == [], f"{len(cycles)} import cycles, e.g. {' -> '.join(cycles[0] + cycles[0][:1])}"
 
 
@@ -147,7 +171,7 @@ def test_the_checks_see_what_they_look_for(tmp_path):
 ENV_PACKAGES = ("continuum_gym.envs.occlusion", "continuum_gym.envs.view_tracking")
 #: Modules outside them that may name one environment's modules, and why.
 ENV_NAMING = {
-    "continuum_gym.envs.registration": "BUILTIN_ENVS lists the library's environment packages",
+    "continuum_gym.envs.spec": "BUILTIN_ENVS lists the library's environment packages",
     "continuum_gym.envs": "re-exports the environments' classes (continuum_gym.envs.OcclusionConfig, ...)",
     # one environment's own pieces in the layers above the environments, each named by its spec
     # (scene, optimum, warm_ups) or by its module name
@@ -155,7 +179,8 @@ ENV_NAMING = {
     "continuum_gym.render.view_scene": "the ViewTracking scene (spec.scene)",
     "continuum_gym.evaluation.optimum.occlusion": "the OcclusionAvoidance optimum (spec.optimum)",
     "continuum_gym.evaluation.optimum.rate_bound": "the OcclusionAvoidance hold tasks' rate-limited bound",
-    "continuum_gym.agents.distilled_view": "ViewTracking's distilled-optimum base, a registered controller",
+    "continuum_gym.evaluation.optimum.optima": "files the two environments' optima by id (register_optimum)",
+    "continuum_gym.evaluation.reproduction": "reproduces both papers; its warm-ups of each env's robots (precompile)",
 }
 
 
@@ -197,6 +222,10 @@ def test_the_environment_checks_see_what_they_look_for():
     code = ast.parse('"""ContinuumGym/Doc-v0"""\nX = "ContinuumGym/Code-v0"\n')
     assert [value for value, _ in _strings(code)] == ["ContinuumGym/Code-v0"]
     inside = [name for name in MODULES if name.startswith(ENV_PACKAGES[0] + ".")]
-    assert {"continuum_gym.envs.occlusion.spec", "continuum_gym.envs.occlusion.core"} <= set(inside)
+    assert {"continuum_gym.envs.occlusion.spec", "continuum_gym.envs.occlusion.env"} <= set(inside)
     assert any("ContinuumGym/" in value for value, _ in _strings(ast.parse(MODULES[
-        "continuum_gym.envs.occlusion.spec"].read_text())))
+        "continuum_gym.envs.occlusion.config"].read_text())))
+    # a "module:name" reference in a string is an edge of the layer graph, as an import is
+    graph = _graph()
+    assert graph.has_edge("continuum_gym.envs.occlusion.spec", "continuum_gym.envs.occlusion.env")
+    assert not _graph(references=False).has_edge("continuum_gym.envs.occlusion.spec", "continuum_gym.envs.occlusion.env")

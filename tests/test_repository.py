@@ -119,7 +119,7 @@ def test_every_kept_experiment_made_something_the_readme_names():
 
 
 @pytest.mark.parametrize("artifact", ["continuum_gym/agents/policies", "continuum_gym/agents/policies_model_error",
-                                      "continuum_gym/agents/distilled_view.npz"])
+                                      "continuum_gym/envs/view_tracking/distilled_view.npz"])
 def test_every_shipped_artifact_has_its_line_in_experiments_readme(artifact):
     table = README.read_text().split("| artifact |", 1)[1].split("\n\n", 1)[0]
     first_column = "\n".join(row.split(" | ", 1)[0] for row in table.splitlines()[2:])

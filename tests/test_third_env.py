@@ -27,8 +27,7 @@ ENV_ID = "MyLab/EndoscopeReach-v0"
 @pytest.fixture
 def my_reach(monkeypatch):
     """The example package imported (registering its id), and forgotten afterwards so no other test sees it."""
-    from continuum_gym.envs.registration import ENV_IDS
-    from continuum_gym.envs.spec import ENV_SPECS
+    from continuum_gym.envs.spec import ENV_IDS, ENV_SPECS
 
     monkeypatch.syspath_prepend(str(PACKAGE.parent))
     import my_reach
@@ -80,8 +79,7 @@ def _finite_difference_jacobian(robot, q: np.ndarray, h: float = 1e-7) -> np.nda
 
 
 def test_a_step_is_the_jacobian_transpose_command_integrated(my_reach):
-    from my_reach.core import ACTION_SCALE
-    from my_reach.kernel import GAIN
+    from my_reach.kernel import ACTION_SCALE, GAIN
 
     env = gym.make(ENV_ID).unwrapped
     core = env.core
@@ -93,7 +91,7 @@ def test_a_step_is_the_jacobian_transpose_command_integrated(my_reach):
         goal, _ = core.desired(0, core.steps[0] * core.control_dt)
         command = GAIN * _finite_difference_jacobian(robot, q).T @ (goal - robot.target_point(q))
         np.testing.assert_allclose(core.base_cmd[0], command, rtol=1e-5, atol=1e-6)
-        np.testing.assert_allclose(obs[11:17], np.clip(command / ACTION_SCALE, -10, 10), rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(obs[9:15], np.clip(command / ACTION_SCALE, -10, 10), rtol=1e-5, atol=1e-5)
         assert info["distance_m"] == pytest.approx(np.linalg.norm(goal - robot.target_point(q)), rel=1e-12)
         action = rng.uniform(-1, 1, 6).astype(np.float32)
         obs, reward, _, _, info = env.step(action)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import get_spec
 from continuum_gym.evaluation.io import write_bytes_atomic
 
@@ -42,7 +43,7 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
         kwargs["task"] = "random"
     core = make_core(env_id, n_episodes, **kwargs)
     task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)
-    metric = get_spec(env_id).headline_metric
+    metric = benchmark_of(env_id).headline_metric
     path = run_dir / "evaluations.npz"
 
     class _Eval(BaseCallback):

@@ -48,6 +48,7 @@ from continuum_gym.agents.run_inputs import (
     seed_number,
     whole_number,
 )
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import ENV_SPECS, get_spec, registered_kwargs
 from continuum_gym.evaluation.io import (
     temporary_files,
@@ -125,7 +126,8 @@ def check_steps(algo: str, env_id: str, base: str | None, steps: int | None,
 def default_base(env_id: str) -> str | None:
     """The base an id trains on by default: the one it was registered with, else its env's headline baseline."""
     registered = registered_kwargs(env_id)
-    return registered["base_controller"] if "base_controller" in registered else get_spec(env_id).headline_baseline
+    return registered["base_controller"] if "base_controller" in registered else \
+        benchmark_of(env_id).headline_baseline
 
 
 def _algo_class(algo):
@@ -155,7 +157,7 @@ def notice(message: str) -> None:
 
 def headline_metric(env_id: str) -> str:
     """The held-out metric a run is judged by (its spec's; lower is better for VOI, higher for OR)."""
-    return get_spec(env_id).headline_metric
+    return benchmark_of(env_id).headline_metric
 
 
 @contextlib.contextmanager

@@ -6,17 +6,17 @@ the package registers the ids without compiling or loading any kernel.
 
 import importlib
 
-from continuum_gym.envs.registration import ENV_IDS, register_envs
+from continuum_gym.envs.spec import ENV_IDS, register_envs
 
 register_envs()
 
 _EXPORTS = {
     "OcclusionConfig": "occlusion.config", "ViewTrackingConfig": "view_tracking.config", "EnvConfig": "config",
-    "ENV_SPECS": "spec", "EnvSpec": "spec", "get_spec": "spec", "register_env": "registration",
+    "ENV_SPECS": "spec", "EnvSpec": "spec", "get_spec": "spec", "register_env": "spec",
     "TipTrajectory": "trajectories", "DaVinciTrajectory": "trajectories",
-    "OcclusionAvoidanceEnv": "occlusion.core", "OcclusionAvoidanceVectorEnv": "occlusion.core",
-    "OcclusionCore": "occlusion.core", "ViewTrackingEnv": "view_tracking.core",
-    "ViewTrackingVectorEnv": "view_tracking.core", "ViewTrackingCore": "view_tracking.core",
+    "OcclusionAvoidanceEnv": "occlusion.env", "OcclusionAvoidanceVectorEnv": "occlusion.env",
+    "OcclusionCore": "occlusion.env", "ViewTrackingEnv": "view_tracking.env",
+    "ViewTrackingVectorEnv": "view_tracking.env", "ViewTrackingCore": "view_tracking.env",
     "ContinuumSB3VecEnv": "sb3", "NamedRewardTerms": "vector", "ModelError": "model_error",
 }
 __all__ = ["ENV_IDS", "register_envs", *sorted(_EXPORTS)]

@@ -1,13 +1,16 @@
 """The batched core behind three front ends: ``gymnasium.Env`` (``envs/single.py``),
 ``gymnasium.vector.VectorEnv`` (``envs/vector.py``) and stable-baselines3's ``VecEnv`` (``envs/sb3.py``).
 
-A *core* (``OcclusionCore``, ``ViewTrackingCore``) holds the state of N robots as arrays and advances
-all of them with one compiled call.
+A core holds the state of N robots as arrays and advances all of them with one compiled call of the env's
+row functions (``envs/rows.py``). It is the library's, written once for every environment: an env declares its
+rows (``envs/core.py: RowFunctions``) and this class allocates their arrays, resets and steps them on threads,
+runs the model-error plant and the plug-ins, and reads ``info`` from the declared columns. ``front_ends`` binds
+it to an env's spec (``OcclusionCore``, ``ViewTrackingCore`` are such bindings, not subclasses with code).
 """
 
 from __future__ import annotations
 
-import abc
+import functools
 import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, cast
@@ -15,6 +18,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, cast
 import numpy as np
 from gymnasium import spaces
 
+from continuum_gym.envs.common_kernels import task_arrays
+from continuum_gym.envs.core import STANDARD_ARRAYS
+from continuum_gym.envs.declared import info_fields, step_values
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
 from continuum_gym.envs.row_claims import KernelCall
 from continuum_gym.robots.compiled import kernel
@@ -23,8 +29,12 @@ from continuum_gym.validation import integer
 if TYPE_CHECKING:
     from continuum_gym.envs.common_kernels import TaskArrays
     from continuum_gym.envs.config import EnvConfig
+    from continuum_gym.envs.core import RowFunctions
     from continuum_gym.envs.model_error import MismatchState
     from continuum_gym.envs.tasks import TaskBatch
+
+#: Every observation entry is clipped to +-OBS_LIMIT (the observation space's bounds).
+OBS_LIMIT = 10.0
 
 
 @kernel
@@ -118,85 +128,99 @@ class OcclusionRowScene(RowScene, Protocol):
     def pixel_occlusion(self, resolution: int = ...) -> float: ...
 
 
-class BatchedCore(abc.ABC):
-    """The contract of a batched core (see ``OcclusionCore``), declared and documented here once.
+class BatchedCore:
+    """N robots of one environment as arrays, advanced by one compiled call of its row functions.
 
-    A core holds the state of N robots as arrays (``q``, ``obs``, ``metrics``, ``flags``, ...) and
-    advances all of them with one compiled call. The front ends (``envs/single.py``, ``envs/vector.py``,
-    ``envs/sb3.py``), evaluation, rendering and precompilation call only what this class declares.
-
-    A concrete core (one that does not pass ``abstract=True`` to the class statement) must define every
-    abstract method below and every name in :data:`REQUIRED_CLASS_ATTRIBUTES`; one that lacks any fails
-    at its class statement with a ``TypeError`` naming what is missing, not deep inside a later call.
+    ``front_ends`` binds this class to an env (``spec``, ``rows``); the front ends (``envs/single.py``,
+    ``envs/vector.py``, ``envs/sb3.py``), evaluation, rendering and precompilation call what it defines.
+    Everything an env is made of comes from its ``RowFunctions`` and its config: the arrays, their columns
+    (``metrics``, ``flags``: ``info`` and the evaluation's values come from their declarations), the kernel
+    bundles (``RowFunctions.build``), the model-error plant (``envs/model_error.py``), and the plug-ins
+    (a registered controller as the base, registered reward terms).
     """
 
-    #: Class attributes a concrete core must set, each documented at its declaration below.
-    REQUIRED_CLASS_ATTRIBUTES: ClassVar[tuple[str, ...]] = (
-        "spec", "config_class", "step_kernel", "terminated_flag", "truncated_flag", "non_finite_flag",
-        "builtin_reward_names", "info_fields", "metric_columns")
-
-    spec: ClassVar[Any] = None  #: the env's ``EnvSpec`` (id, baselines, metrics, scene, kernels)
-    #: The ``EnvConfig`` subclass the core is built from (None here: each concrete core sets it).
-    config_class: ClassVar[type[EnvConfig]] = None  # type: ignore[assignment]  # None: see the line above
-    step_kernel: Any = None  #: the compiled ``*_step_batch`` of the core (a numba dispatcher)
+    spec: ClassVar[Any] = None  #: the env's ``EnvSpec`` (set by ``front_ends``)
+    rows: ClassVar[Any] = None  #: the env's ``RowFunctions`` (set by ``front_ends``)
     _observe_mask: np.ndarray | None = None  # observe_rows' ``active`` (N,) uint8, zero between calls
-    supports_pixel_occlusion = False  #: whether ``pixel_occlusion(row, scene)`` measures something
-    parallel_min_rows = PARALLEL_MIN_ROWS  #: batches of fewer rows are stepped on the calling thread alone
-    claim_block = 1  #: rows a thread claims at a time (``envs/row_claims``): larger where rows are cheap
-    terminated_flag: int  #: the column of ``flags`` its step kernel sets when a row terminates
-    truncated_flag: int  #: ... and when a row is truncated
-    #: ... and when a value of a row is not finite (``common_kernels.mark_non_finite``; see ``envs/faults.py``)
-    non_finite_flag: int
-    num_threads: int  #: threads a large batch may be stepped on (``step_threads(num_threads)``), set by the constructor
-    row_threads: int  #: threads a step runs on (``row_threads``), set by the constructor
-    builtin_reward_names: tuple = ()  #: the env's own reward terms, in the order of its weights
-    info_fields: tuple = ()  #: ``InfoField``s: one definition of ``info`` for one row and for the batch
-    metric_columns: dict = {}  #: info name -> column of ``metrics``, for numpy reward terms
+    config: EnvConfig  #: the validated configuration the core was built from
     num_envs: int
-    config: EnvConfig  #: the validated configuration the core was built from (set by the constructor)
     dof: int  #: joints per row: the width of joint bit flags (``info["clamped_joints"]``) and of ``q``
     single_observation_space: spaces.Box
     single_action_space: spaces.Box
-    obs: np.ndarray  # (N, obs_dim) float64
     task_count: int
-    # Set by every concrete core's constructor; declared for the methods below that read them (and ``config``,
-    # left undeclared: continuum_gym/evaluation/evaluate.py ignores its absence).
     q: np.ndarray  # (N, dof) joints
     steps: np.ndarray  # (N,) int64 control steps since reset
+    obs: np.ndarray  # (N, obs_dim) float64
+    base_cmd: np.ndarray  # (N, action_dim) the baseline's command at the current state
     metrics: np.ndarray  # (N, n_metrics) float64
     flags: np.ndarray  # (N, n_flags) int64
     terms: np.ndarray  # (N, n_terms) float64 weighted reward terms
     rewards: np.ndarray  # (N,) float64
+    limit: np.ndarray  # (N,) int64 episode step limits
     #: (1,) int64: rows the kernels flagged non-finite since the last check (the step's ``out.faults``)
     _faults: np.ndarray
-    limit: np.ndarray  # (N,) int64 episode step limits
-    control_dt: float
-    substeps: int
-    max_episode_steps: int | None
-    base_controller: str | None
-    weights: dict[str, float]
     tasks: TaskBatch
     _tasks: TaskArrays
-    _state: Any  # the step kernel's bundles (namedtuples of the env's kernel module)
-    _env: Any
-    _out: Any
-    _model: tuple
 
-    def __init_subclass__(cls, abstract: bool = False, **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
-        if abstract:
-            return
-        missing = sorted(name for name, value in vars(BatchedCore).items()
-                         if getattr(value, "__isabstractmethod__", False)
-                         and getattr(getattr(cls, name), "__isabstractmethod__", False))
-        def defines(name: str) -> bool:  # set, not None, by a class below BatchedCore (the nearest one wins)
-            owner = next(k for k in cls.__mro__ if name in vars(k) or k is BatchedCore)
-            return owner is not BatchedCore and vars(owner)[name] is not None
+    def __init__(self, num_envs: int = 1, config: EnvConfig | None = None, num_threads: int | None = None,
+                 **kwargs: Any) -> None:
+        if self.rows is None:
+            raise TypeError("BatchedCore is bound to an environment by envs.front_ends.front_ends(spec, rows, ...); "
+                            "make the env's core class (e.g. spec.core_class()), not BatchedCore itself")
+        rows: RowFunctions = self.rows
+        self.config = config = self._config(config, kwargs)
+        self.num_envs = n = self._num_envs(num_envs)
+        self.task_split = config.task_split
+        self.base_controller = config.base_controller
+        self.residual_scale = config.residual_scale
+        self.weights = config.reward_weights
+        self.control_dt = config.control_dt
+        self.substeps = getattr(config, "substeps", 1)
+        self.max_episode_steps = config.max_episode_steps
+        self.robot = config.robot
+        self.dof = self.robot.dof
+        built = rows.build(config)
+        self.parts = built.parts
+        self.task_context = built.context
+        self.task_source = config.task_source
+        self.task_count = self.task_source.count(self.task_split, self.task_context)
+        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (built.obs_dim,), np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (built.action_dim,), np.float32)
+        self.info_fields = info_fields((rows.metrics, rows.flags), rows.info)
+        self.metric_columns = {c.declared.info: int(c) for c in rows.metrics if c.declared.info}
+        self.builtin_reward_names = rows.reward_terms
+        self.terminated_flag = int(rows.flags[rows.terminated])
+        self.truncated_flag = int(rows.flags[rows.truncated])
+        self.non_finite_flag = len(rows.flags) - 1
+        self.parallel_min_rows, self.claim_block = rows.parallel_min_rows, rows.claim_block
+        self._setup_mismatch(rows.model_error, getattr(self.robot, "n_segments", 2))
+        self._setup_rewards()
+        sizes = {"dof": self.dof, "command": built.command, "obs": built.obs_dim, "metrics": len(rows.metrics),
+                 "flags": len(rows.flags), "terms": len(self.reward_names)}
+        for name, (shape, dtype) in STANDARD_ARRAYS.items():
+            setattr(self, name, np.zeros((n, *(sizes[s] for s in shape)), dtype=dtype))
+        for name, extra in rows.arrays.items():
+            setattr(self, name, np.zeros((n, *extra.shape), dtype=extra.dtype))
+        self._faults = np.zeros(1, dtype=np.int64)
+        self.num_threads = step_threads(num_threads)
+        self.row_threads = row_threads(n, self.num_threads, self.parallel_min_rows)
+        self.tasks = self.task_source.batch(self.task_split, np.zeros(n, dtype=np.int64), self.task_context)
+        self._state = rows.state(*(getattr(self, name) for name in rows.state._fields))
+        self._tasks = task_arrays(self.tasks, self.limit)
+        self._out = rows.outputs(*(getattr(self, "_" + name if name == "faults" else name)
+                                   for name in rows.outputs._fields))
+        self._model, self._params = built.model, built.params
+        self.layers = tuple(layer(self) for layer in built.layers)
 
-        missing += [name for name in BatchedCore.REQUIRED_CLASS_ATTRIBUTES if not defines(name)]
-        if missing:
-            raise TypeError(f"{cls.__name__} is a BatchedCore but does not define {', '.join(missing)} "
-                            "(see continuum_gym.envs.batched.BatchedCore; pass abstract=True for a partial core)")
+    def __getattr__(self, name: str) -> Any:
+        # the env's own objects (its built-in controller, cameras, limits, ...) read as core.<name>
+        parts = self.__dict__.get("parts")
+        if parts is not None and name in parts:
+            return parts[name]
+        method = self.rows.methods.get(name) if self.rows is not None else None
+        if method is not None:
+            return functools.partial(method, self)
+        raise AttributeError(f"{type(self).__name__} has no attribute {name!r}")
 
     def _config(self, config, kwargs):
         """The validated config: ``config`` as given (an ``EnvConfig``, or the dict its ``to_dict()`` wrote, as
@@ -208,6 +232,11 @@ class BatchedCore(abc.ABC):
         if not isinstance(config, self.config_class):
             raise ValueError(f"config must be a {self.config_class.__name__}; got {type(config).__name__}")
         return config.replace(**kwargs) if kwargs else config
+
+    @property
+    def config_class(self) -> type[EnvConfig]:
+        """The ``EnvConfig`` subclass the core is built from (the spec's)."""
+        return self.spec.config_class
 
     @staticmethod
     def _num_envs(num_envs) -> int:
@@ -227,17 +256,25 @@ class BatchedCore(abc.ABC):
             reader = self._info_row_reader = row_reader(self.info_fields, self)
         return reader(self, row)
 
-    @abc.abstractmethod
-    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
-        """Start new episodes in ``rows`` (int64) on the task instances ``task_ids`` and observe them."""
-
-    @abc.abstractmethod
     def step_values(self) -> dict:
-        """Per-step values {name: (N,) array} the evaluation reduces to episode metrics (``spec.episode_metrics``)."""
+        """Per-step values {name: (N,) array} the evaluation reduces to episode metrics (the declared columns')."""
+        return step_values(self, (self.rows.metrics, self.rows.flags))
 
-    @abc.abstractmethod
     def controller_observation(self, row: int = 0) -> dict:
         """The dict observation an analytic or registered controller's ``predict`` reads, for one row."""
+        return self.rows.controller_observation(self, row)
+
+    def reset_rows(self, rows: np.ndarray, task_ids: np.ndarray) -> None:
+        """Start new episodes in ``rows`` (int64) on the task instances ``task_ids`` and observe them."""
+        rows = np.asarray(rows, dtype=np.int64)
+        fresh = self.task_source.batch(self.task_split, task_ids, self.task_context)
+        self._install_tasks(rows, fresh)
+        for name, extra in self.rows.arrays.items():
+            getattr(self, name)[rows] = getattr(fresh, extra.start) if extra.start else 0
+        self._reset_mismatch(rows, task_ids)
+        self.observe_rows(rows)
+        for layer in self.layers:
+            layer.reset_rows(rows)
 
     def step(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
@@ -245,6 +282,12 @@ class BatchedCore(abc.ABC):
         Returns (rewards, terminated, truncated) arrays and fills ``self.obs``. The value 2
         (``OBSERVE_ONLY``) is reserved for ``observe_rows``: such a row is observed, not stepped.
         """
+        if self.layers:  # Python layers around the compiled step (``Built.layers``)
+            return self._step_layered(actions, active)
+        return self._step_rows(actions, active)
+
+    def _step_rows(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The compiled step of the rows, the registered reward terms, the check of non-finite values."""
         before = self.joint_values() if self._rates_wanted else None
         self._step_call(self.kernel_args(actions, active), actions, active, self.num_envs, self.row_threads,
                         self.claim_block)
@@ -257,6 +300,18 @@ class BatchedCore(abc.ABC):
         # The kernels write the flags as 0 / 1; astype(bool) is `!= 0` at half the cost (0.6 vs 1.3 us per step).
         return (self.rewards, self.flags[:, self.terminated_flag].astype(bool),
                 self.flags[:, self.truncated_flag].astype(bool))
+
+    def _step_layered(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``step`` through the env's Python layers: each changes the actions the kernel gets, then sees the step."""
+        memos = []
+        sent = actions
+        for layer in self.layers:
+            sent, memo = layer.actions(sent, active)
+            memos.append(memo)
+        out = self._step_rows(sent, active)
+        for layer, memo in zip(self.layers, memos):
+            layer.after_step(actions, memo)
+        return out
 
     def _setup_rewards(self) -> None:
         """Reward names and slots: the built-in terms, then the registered compiled, then numpy terms."""
@@ -273,6 +328,7 @@ class BatchedCore(abc.ABC):
         """The compiled slots of the registered controller and reward terms (typed lists, rebuilt on unpickling)."""
         from continuum_gym.envs import registered
         from continuum_gym.envs.custom import controller_slot, reward_slot
+        from continuum_gym.envs.rows import step_batch
 
         controllers = registered.CONTROLLERS[self.spec.env_id]
         if self.base_controller is not None and self.base_controller not in self.spec.baselines \
@@ -282,45 +338,41 @@ class BatchedCore(abc.ABC):
             self.spec.env_id, controllers.get(self.base_controller))  # type: ignore[arg-type]  # None: no controller
         self._reward_slot = reward_slot(self._compiled_terms, [self.weights[t.name] for t in self._compiled_terms])
         self._rates_wanted = bool(self._compiled_terms or self._numpy_terms)
-        self._step_call = KernelCall(self.step_kernel if self._mismatch is None else self.mismatch_kernel())
+        self._step_call = KernelCall(step_batch)
 
     def __getstate__(self) -> dict:
         # numba's typed lists do not pickle; the slots are rebuilt from the registry on unpickling
         state = self.__dict__.copy()
-        state.pop("_custom", None)
-        state.pop("_reward_slot", None)
-        state.pop("_step_call", None)  # a compiled entry point: looked up again after unpickling
-        state.pop("_info_row_reader", None)  # generated code: found again on first use
+        for name in ("_custom", "_reward_slot", "_step_call", "_info_row_reader", "_model"):
+            state.pop(name, None)  # compiled entry points, generated code, read-only arrays: made again
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        self._model = self.kernel_model()  # read-only robot arrays again (unpickled ones are writeable)
+        self._model = self.rows.build(self.config).model  # read-only robot arrays again (unpickled ones are not)
         self._make_slots()
 
     def kernel_args(self, actions: np.ndarray, active: np.ndarray) -> tuple:
-        """The step kernel's bundles around the per-step ``actions`` (N or 1, k) and ``active`` (N,) uint8."""
-        return (self._state, actions, active, self._tasks, *self._model, self._env, self._custom, self._out,
-                *self._mismatch_args)
+        """``envs.rows.step_batch``'s bundles around the per-step ``actions`` (N or 1, k) and ``active`` (N,) uint8."""
+        return (self._state, actions, active, self._tasks, self._model, self._params, self._custom, self._out,
+                self._plant)
 
     # ------------------------------------------------------------------ model error (envs/model_error.py)
-    #: The ``MismatchState`` of a core whose ``model_error`` is not "none" (then ``mismatch_kernel`` steps it).
+    #: The ``MismatchState`` of a core whose ``model_error`` is not "none" (the rows then run with its plant).
     _mismatch: MismatchState | None = None
-    _mismatch_args: tuple = ()  #: (its ``MismatchArrays``,), the step kernel's last bundle
-
-    def mismatch_kernel(self) -> Any:
-        """The compiled step of this env under a model error (imported only when one is used)."""
-        raise NotImplementedError(f"{type(self).__name__} has no model-error step")
+    _plant: Any = None  #: its arrays, the row functions' ``plant`` (None: no model error)
 
     def _setup_mismatch(self, env: str, n_segments: int) -> None:
         """Per-row model errors and plant state when ``config.model_error`` is not "none"."""
         from continuum_gym.envs.model_error import MismatchState, is_active, with_model_error_info
 
-        if not is_active(self.config.model_error):
+        if not is_active(getattr(self.config, "model_error", "none")):
             return
+        if not env:
+            raise ValueError(f"model_error: {self.spec.env_id} has no model-error plant (its RowFunctions name none)")
         self._mismatch = MismatchState(self, env, self.dof, n_segments, self.substeps)
-        self._mismatch_args = (self._mismatch.arrays,)
-        self.info_fields = with_model_error_info(type(self).info_fields)
+        self._plant = self._mismatch.arrays
+        self.info_fields = with_model_error_info(self.info_fields)
 
     def measured_joints(self, row: int) -> np.ndarray:
         """A copy of a row's joints as its sensors read them (the true ones without a model error)."""
@@ -338,8 +390,7 @@ class BatchedCore(abc.ABC):
         """Recompute observation, metrics and the cached baseline command of ``rows`` from their state.
 
         The step kernel does it for rows marked ``OBSERVE_ONLY`` (it reads no action for them): one
-        compiled kernel holds both, so a process loads the observation's code once (an observe kernel of
-        its own would compile and hold that code a second time: more RSS and a longer first compile).
+        compiled kernel holds both, so a process loads the observation's code once.
         """
         from continuum_gym.envs.common_kernels import OBSERVE_ONLY
 
@@ -361,16 +412,19 @@ class BatchedCore(abc.ABC):
         """(N,) bool: rows whose last step (or reset) had a value that is not finite (``info["non_finite"]``)."""
         return self.flags[:, self.non_finite_flag] != 0
 
-    @abc.abstractmethod
-    def kernel_model(self) -> tuple:
-        """The model bundles of the step kernels: the robot's and the controller's (and the cameras')."""
-
     def joint_values(self) -> np.ndarray:
-        """A copy of every row's joints (N, k) in the action's index layout (rad; m for insertion)."""
-        return self._state.q.copy()
+        """A copy of every row's joints (N, k) in the action's index layout (rad; m for insertion): ``q`` and the
+        env's joint arrays after it (OcclusionAvoidance's endoscope rotation gamma)."""
+        joints = self.rows.joints
+        if not joints:
+            return self.q.copy()
+        return np.concatenate([self.q, *(getattr(self, name)[:, None] for name in joints)], axis=1)
 
-    #: Columns of ``joint_values`` that are angles on the circle (their change is wrapped to [-pi, pi)).
-    circular_joint_columns: tuple[int, ...] = ()
+    @property
+    def circular_joint_columns(self) -> tuple[int, ...]:
+        """Columns of ``joint_values`` that are angles on the circle (their change is wrapped to [-pi, pi))."""
+        joints = self.rows.joints
+        return tuple(self.dof + k for k, name in enumerate(joints) if self.rows.arrays[name].circular)
 
     def _applied_rates(self, before: np.ndarray) -> np.ndarray:
         """The rates the robot applied over the last control step: (joints now - ``before``) / control_dt."""
@@ -480,10 +534,14 @@ class BatchedCore(abc.ABC):
         scene.show_row(self, row)
         return scene.render(camera=camera, width=size, height=size)
 
+    @property
+    def supports_pixel_occlusion(self) -> bool:
+        """Whether the env's pybullet scene measures the pixel occlusion of its endoscope image."""
+        return callable(getattr(self.spec.scene_class(), "pixel_occlusion", None))
+
     def pixel_occlusion(self, row: int, scene: RowScene, resolution: int = 128) -> float:
         """Fraction of the endoscope image's field of view the robot covers in one row's state."""
-        if not self.supports_pixel_occlusion:
+        if not callable(getattr(scene, "pixel_occlusion", None)):
             raise ValueError(f"pixel_occlusion applies to OcclusionAvoidance only; this env is {self.spec.env_id}")
         scene.show_row(self, row)
-        return cast("OcclusionRowScene", scene).pixel_occlusion(resolution)  # supports_pixel_occlusion: it measures
-
+        return cast("OcclusionRowScene", scene).pixel_occlusion(resolution)

@@ -20,23 +20,62 @@ from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any
 
-from continuum_gym.robots.compiled import kernel
+
+@dataclass(frozen=True)
+class Episode:
+    """A per-episode value the evaluation reduces from a column, and the table column it may fill."""
+
+    name: str  #: key of the per-episode results and the JSON (``mean_voi``)
+    reduce: str = "mean"  #: "mean" over the episode's steps, or "final" (the last step's value)
+    label: str = ""  #: words of a table column and figure axis; "" : a diagnostic value, not a column
+    higher_is_better: bool = False
+    unit: str = ""  #: SI unit of the value ("" for ratios, "%" for percentages)
+    display_unit: str = ""  #: unit shown in tables and figures ("" = ``unit``)
+    display_scale: float = 1.0  #: value x scale = shown value
+    #: a coverage column: 100 x the fraction of the grid's episodes whose ``final`` value exceeds this
+    grid_threshold: float | None = None
+
+
+def mean(name: str, label: str = "", *, higher_is_better: bool = False, unit: str = "", display_unit: str = "",
+         display_scale: float = 1.0) -> Episode:
+    """The episode's mean of a column (a table column when ``label`` is given)."""
+    return Episode(name, "mean", label, higher_is_better, unit, display_unit, display_scale)
+
+
+@dataclass(frozen=True)
+class Value:
+    """What a column of ``metrics`` or ``flags`` holds, declared once: the kernel writes it (``Metric.VOI`` is
+    its index), and from this declaration it reaches ``info``, the env docstring and the evaluation's tables."""
+
+    doc: str
+    info: str = ""  #: its ``info`` entry ("" : none)
+    kind: str = "float"  #: the ``info`` value: "float", "bool" (the column is 0 or 1), "bits" (per joint, (dof,))
+    unit: str = ""  #: SI unit ("" for ratios and flags)
+    episode: tuple[Episode, ...] = ()  #: what the evaluation reduces from it per episode
+
+
+#: Every env's last flag, which the library sets (``envs/rows.py``) and reads (``envs/faults.py``).
+NON_FINITE = Value("a value of the row was not finite (NaN or inf) and its episode ended as truncated (only with "
+                   "``on_non_finite='truncate'``; its metrics are NaN)", info="non_finite", kind="bool")
 
 
 class Columns(IntEnum):
-    """Named columns of an array, in declaration order: declare each as ``NAME = "what it holds"``.
+    """Named columns of an array, in declaration order: declare each as ``NAME = "what it holds"`` or
+    ``NAME = Value(...)`` (a value that reaches ``info`` and the evaluation).
 
     A member is the column's index (an ``int``, usable in numpy and in compiled kernels) and carries its
-    description as ``doc``.
+    declaration as ``declared`` and its description as ``doc``.
     """
 
     doc: str
+    declared: Value
 
-    def __new__(cls, doc: str) -> Columns:
+    def __new__(cls, declared: str | Value) -> Columns:
         index = len(cls.__members__)
         member = int.__new__(cls, index)
         member._value_ = index
-        member.doc = doc
+        member.declared = declared if isinstance(declared, Value) else Value(declared)
+        member.doc = member.declared.doc
         return member
 
     @classmethod
@@ -112,8 +151,7 @@ class Layout:
         return "\n".join(indent + line for line in lines)
 
 
-@kernel(inline="always")
-def at(block_start, n_segments):
+def at(block_start: tuple[int, int], n_segments: int) -> int:
     """Index of a :class:`Layout` block's first entry (``offsets()``'s ``(per_segment, constant)``) for
-    a robot of ``n_segments``."""
+    a robot of ``n_segments``: plain Python; the kernels use ``common_kernels.at``, its compiled twin."""
     return block_start[0] * n_segments + block_start[1]

@@ -35,6 +35,13 @@ def task_arrays(batch: TaskBatch, limit: np.ndarray) -> TaskArrays:
 
 
 @kernel(inline="always")
+def at(block_start, n_segments):
+    """Index of an observation block's first entry (``Layout.offsets()``'s ``(per_segment, constant)``) for a
+    robot of ``n_segments`` (``columns.at`` in Python)."""
+    return block_start[0] * n_segments + block_start[1]
+
+
+@kernel(inline="always")
 def trajectory_point(centre, amp, omega, phase, t, p, v):
     """x(t) = c + sum a_k sin(w_k t + phi_k) and its derivative, into p and v."""
     for a in range(p.shape[0]):

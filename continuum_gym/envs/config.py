@@ -93,6 +93,8 @@ class EnvConfig:
     packaged_controllers: ClassVar[tuple] = ()
     #: Keywords whose objects (robot, endoscope, model error) may also be given as ``to_dict()`` writes them.
     object_keywords: ClassVar[tuple] = ("robot", "model_error")
+    #: "module:Class" of the robots the env takes (``registry.register_robot`` checks a plug-in against it)
+    robot_class: ClassVar[str] = ""
     #: The trajectory class of the env's tasks (``TipTrajectory`` / ``DaVinciTrajectory``), as "module:Class".
     trajectory_class: ClassVar[str] = ""
     default_weights: ClassVar[dict] = {}  #: the built-in reward terms' default weights

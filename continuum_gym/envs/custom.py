@@ -77,7 +77,7 @@ TERM_DOC = ("term(metrics (n_metrics,), flags (n_flags,) int64, action (k,), rat
 def controller_module(controller: RegisteredController) -> ModuleType:
     """The module through which a registered controller is compiled, checked and called.
 
-    Its env's spec names it (``EnvSpec.controller_module``, recorded on the controller at registration);
+    Its env's spec names it (``RowFunctions.controller``, recorded on the controller at registration);
     it defines ``RATES_DOC`` (the call convention of ``rates``), ``rates_signature()`` (its numba
     signature), ``trial_rates(controller)`` (its command at the paper's home state) and
     ``predict(controller, observation)``.

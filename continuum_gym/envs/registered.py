@@ -1,8 +1,8 @@
 """What is registered: the plug-in tables the environments read, and the records of where each came from.
 
-``continuum_gym.registry`` fills these tables (its ``register_*`` functions check what they are given
-with the environments' own code); the environments only read them, so this module sits below both and
-imports no environment module.
+``continuum_gym.registry`` is the public module that fills these tables (its ``register_*`` functions check
+what they are given with the environments' own code); the environments only read them, so this module sits below
+both and imports no environment module.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ class CustomController:
     rates: Any
     params: np.ndarray
     doc: str = ""
-    #: the env's module that compiles, checks and calls it (``EnvSpec.controller_module``)
+    #: the env's module that compiles, checks and calls it (``RowFunctions.controller``)
     module: str = ""
 
     def predict(self, observation: dict[str, Any], state: tuple[np.ndarray, ...] | None = None,
@@ -84,6 +84,19 @@ def resolve(kind: str, env: str, value: str) -> str:
     return plugins.lookup(TABLES[kind][env], value, f"{kind}", env)
 
 
+def add_controller(name: str, env: str, rates: Any, params: np.ndarray, doc: str, module: str,
+                   origin: str | None) -> CustomController:
+    """File a controller after checking it (compiled for its env's signature and tried once): ``registry``'s
+    ``register_controller`` does this for a researcher's, an env package for a controller it ships."""
+    from continuum_gym.envs.custom import check_controller
+
+    controller = CustomController(name, env, rates, params, doc, module)
+    check_controller(controller)
+    CONTROLLERS[env][name] = controller
+    record("controller", env, name, origin)
+    return controller
+
+
 def robot_names(env_id: str) -> tuple:
     return tuple(ROBOTS.get(env_id, {}))
 
@@ -92,5 +105,5 @@ def controller_names(env_id: str) -> tuple:
     return tuple(CONTROLLERS.get(env_id, {}))
 
 
-__all__ = ["TABLES", "record", "CustomController", "RewardTerm", "ROBOTS", "TASKS", "CONTROLLERS", "REWARD_TERMS", "ORIGINS",
-           "origin_of", "reference_of", "resolve", "robot_names", "controller_names"]
+__all__ = ["add_controller", "TABLES", "record", "CustomController", "RewardTerm", "ROBOTS", "TASKS", "CONTROLLERS",
+           "REWARD_TERMS", "ORIGINS", "origin_of", "reference_of", "resolve", "robot_names", "controller_names"]

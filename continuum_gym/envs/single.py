@@ -43,7 +43,11 @@ def check_render_arguments(metadata: dict, core: BatchedCore, render_mode: Any, 
     """(render_mode, camera, pixel_occlusion) checked against the env's render modes and cameras."""
     if render_mode is not None:
         choice(render_mode, metadata["render_modes"], "render_mode")
-    choice(camera, core.spec.cameras, "camera")
+        if not core.spec.scene:
+            raise ValueError(f"render_mode={render_mode!r}: {core.spec.env_id} has no scene to draw (its EnvSpec "
+                             "names none); make it without render_mode")
+    if core.spec.cameras or camera != "external":
+        choice(camera, core.spec.cameras, "camera")
     pixel_occlusion = boolean(pixel_occlusion, "pixel_occlusion")
     if pixel_occlusion and not core.supports_pixel_occlusion:
         raise ValueError(f"pixel_occlusion=True applies to environments with a view cone to occlude "

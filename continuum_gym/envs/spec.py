@@ -1,12 +1,13 @@
-"""One record per environment id: what training, evaluation, rollout, recording and the SB3 adapter read.
+"""One record per environment id: what the environment is.
 
-An ``EnvSpec`` names the config class and the batched core of an id, its analytic baselines, the
-metrics a method is judged by (with their units and which direction is better), the evaluation task
-sets, the per-episode reductions of the per-step values, the offline-optimum rows of the table and
-what ``continuum-gym render`` records, and the hooks (goal front end, robot class, controller module,
-optimum, precompile warm-ups) by which the rest of the library reaches the environment. Each environment's
-package registers its own spec (``envs/occlusion/spec.py``, ``envs/view_tracking/spec.py``) with
-``register_env``; this module is generic and names no environment.
+An ``EnvSpec`` names the id, the config class, the env's row functions (``envs/core.py: RowFunctions``, imported on
+first use), its front ends' entry points, its analytic baselines, the columns its rows declare and, of their
+per-episode values, the ones the evaluation's tables show (``metrics``, with their units and which direction is
+better). How the env is evaluated and reported (task sets, optimum, headroom, traces) is another declaration,
+``continuum_gym.envs.benchmark.Benchmark``, with defaults for an env that declares none; how it is drawn
+is its pybullet scene (``scene``, named, not imported, so the environments do not depend on the renderer).
+Each environment's package registers its own spec (``envs/occlusion/spec.py``) with ``register_env``; this module
+is generic and names no environment.
 
 This module is light (no compiled code is imported until ``core_class()`` is called), so command-line
 help and argument errors answer at once.
@@ -14,133 +15,80 @@ help and argument errors answer at once.
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from gymnasium.envs.registration import register, registry
+
 from continuum_gym.envs.config import EnvConfig
+from continuum_gym.envs.declared import EpisodeMetric, Metric, episode_metrics, table_metrics
 from continuum_gym.plugins import ENTRY_POINT_GROUP, ENV_VAR
 from continuum_gym.plugins import load_object as load
 from continuum_gym.validation import closest
 
 if TYPE_CHECKING:
-    from continuum_gym.envs.batched import BatchedCore
-
-
-@dataclass(frozen=True)
-class Metric:
-    """A column of the evaluation table."""
-
-    name: str  #: key in the per-episode results and the JSON
-    label: str  #: words for tables and figure axes
-    unit: str  #: SI unit of the stored value ("" for ratios, "%" for percentages)
-    higher_is_better: bool
-    display_unit: str = ""  #: unit shown in tables and figures ("" = ``unit``)
-    display_scale: float = 1.0  #: stored value x scale = shown value
-    grid_metric: str = ""  #: if set: 100 x the fraction of grid episodes whose ``grid_metric`` > ``threshold``
-    threshold: float = 0.0
-
-    def axis_label(self) -> str:
-        """'<label> (<unit>), lower is better' for figure axes."""
-        unit = self.display_unit or self.unit
-        direction = "higher is better" if self.higher_is_better else "lower is better"
-        return f"{self.label}{f' ({unit})' if unit else ''}, {direction}"
-
-
-@dataclass(frozen=True)
-class EpisodeMetric:
-    """How a per-episode metric is reduced from the per-step values of ``core.step_values()``."""
-
-    name: str
-    step_value: str
-    reduce: str = "mean"  #: "mean" over the episode's steps, or "final" (the last step's value)
-
-
-@dataclass(frozen=True)
-class TaskSet:
-    """Task instances every method is evaluated on (test split)."""
-
-    task: str
-    episodes: int | None = None  #: None: the evaluation's ``--episodes``
-    grid: bool = False  #: one episode per grid point (``--grid`` squared)
-
-
-@dataclass(frozen=True)
-class ReferenceRow:
-    """A row of the table that comes from the shipped offline-optimum cache instead of episodes."""
-
-    method: str  #: row name, e.g. "offline_optimum"
-    cache_key: str  #: top-level key of the cache
-    values: str  #: key of the per-task values inside it
-    metric: str  #: table column it fills
-    kind: str  #: "per_task" (one value per task id of ``task``) or "coverage" (OR > threshold, in %)
-    task: str  #: the task set it belongs to
-    note: str = ""
+    from continuum_gym.envs.core import RowFunctions
 
 
 @dataclass(frozen=True)
 class EnvSpec:
-    """Everything the library's tooling needs to know about one environment id."""
+    """What an environment id is: everything the library needs to make, run and score it."""
 
     env_id: str
     config_class: type[EnvConfig]
-    core: str  #: "module:Class" of the batched core
-    entry_point: str
-    vector_entry_point: str
-    max_episode_steps: int  #: the longest built-in task's duration at the default control_dt (not registered)
+    rows: str  #: "module:NAME" of the env's ``RowFunctions`` (its module also holds the front ends)
+    entry_point: str  #: "module:Class" of the single env
+    vector_entry_point: str  #: ... of the native vector env
     baselines: tuple[str, ...]  #: analytic controllers that can be the residual base (table order)
-    headline_baseline: str  #: the default base: the headline residual is trained on it and compared with it
-    headline_metric: str  #: the held-out metric a training run is judged by
-    metrics: tuple[Metric, ...]
-    episode_metrics: tuple[EpisodeMetric, ...]
-    task_sets: tuple[TaskSet, ...]
-    diagnostics: tuple[str, ...]  #: per-task columns beside the headline metrics (Markdown only)
-    policy_keys: tuple[str, ...]  #: env keywords that define how a policy's action acts (from its config)
-    references: tuple[ReferenceRow, ...]
-    optimum_tasks: tuple[str, ...]  #: what ``continuum-gym optimum`` computes for this env
-    headroom: tuple[str, str]  #: (task, metric) on which headroom_closed is measured
-    trace_task: str  #: the paper task whose per-step trace is drawn
-    trace_value: str  #: the per-step value drawn
-    cameras: tuple[str, ...]
-    record_task: str  #: default task of ``continuum-gym render``
-    record_value: str  #: per-step value shown under the recorded frames
-    #: "module:Class" of the pybullet scene that draws the env (``Scene.from_core`` / ``show_row``):
-    #: named, not imported, so the environments do not depend on the renderer
+    columns: tuple = ()  #: the env's declared columns (its ``Metric`` and ``Flag``: ``envs.columns``)
+    #: the evaluation table's columns, in order: names of labelled episode values of ``columns``
+    metrics: tuple = ()
+    goal_entry_point: str = ""  #: "module:Class" of the goal-conditioned front end (HER); its id is ``goal_id``
+    #: "module:Class" of the pybullet scene that draws the env (``Scene.from_core`` / ``show_row``) and its cameras
     scene: str = ""
-    # What the rest of the library asks of an environment, named here so that no module outside its package
-    # branches on its id. Each "module:name" is imported on first use; an empty value: the env lacks it.
-    goal_id: str = ""  #: id of the goal-conditioned front end (HER), registered beside ``env_id``
-    goal_entry_point: str = ""  #: "module:Class" of that front end
-    robot_class: str = ""  #: "module:Class" of the robots ``registry.register_robot`` files under this env
-    #: the module a registered controller is compiled, checked and called through (``envs/custom.py``'s
-    #: ``controller_module``)
-    controller_module: str = ""
-    #: config fields the offline optimum depends on (the task, rewards and base controller do not); ():
-    #: no optimum is known for the env
-    physics: tuple[str, ...] = ()
-    #: "module:function" computing the optimum cache of a variant:
-    #: ``fn(config, *, episodes, grid, split, progress, workers) -> dict`` keyed by ``references``' cache keys
-    optimum: str = ""
-    #: "module:function"s that call the env's library API (batched kinematics, baselines) once, so that
-    #: ``continuum-gym precompile`` compiles what ``continuum-gym reproduce`` runs
-    warm_ups: tuple[str, ...] = ()
+    cameras: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.metrics and isinstance(self.metrics[0], str):
+            object.__setattr__(self, "metrics", table_metrics(self.columns, self.metrics))
 
     @property
     def short_name(self) -> str:
         """'OcclusionAvoidance' for 'ContinuumGym/OcclusionAvoidance-v0'."""
         return self.env_id.split("/")[-1].split("-")[0]
 
+    @property
+    def goal_id(self) -> str:
+        """The id of the goal-conditioned front end (``<namespace>/<name>Goal-v<version>``), or "" if none."""
+        if not self.goal_entry_point:
+            return ""
+        namespace, _, name = self.env_id.rpartition("/")
+        base, _, version = name.rpartition("-")
+        return f"{namespace + '/' if namespace else ''}{base}Goal-{version}"
+
+    @property
+    def episode_metrics(self) -> tuple[EpisodeMetric, ...]:
+        """The per-episode values the evaluation reduces from the declared columns."""
+        return episode_metrics(self.columns)
+
+    def row_functions(self) -> RowFunctions:
+        """The env's ``RowFunctions`` (imports its compiled code)."""
+        return load(self.rows)
+
     def core_class(self) -> type:
-        return load(self.core)
+        """The env's batched core class (``envs.front_ends``), its compiled code imported now."""
+        return load(self.entry_point).core_class
 
     def scene_class(self) -> type:
-        return self.hook("scene")
+        if not self.scene:
+            raise ValueError(f"{self.short_name} has no pybullet scene (its EnvSpec names none): it cannot be drawn")
+        return load(self.scene)
 
-    def hook(self, name: str) -> Any:
-        """The object a "module:name" field names (``spec.hook("optimum")``), imported now."""
-        reference = getattr(self, name)
-        if not reference:
-            raise ValueError(f"{self.short_name} has no {name} (its EnvSpec leaves {name} empty)")
-        return load(reference)
+    @property
+    def robot_class(self) -> str:
+        """"module:Class" of the env's robots (its config's), which ``registry.register_robot`` checks against."""
+        return self.config_class.robot_class
 
     def metric(self, name: str) -> Metric:
         for metric in self.metrics:
@@ -148,14 +96,52 @@ class EnvSpec:
                 return metric
         raise KeyError(name)
 
-    def make_core(self, num_envs: int, **env_kwargs: Any) -> BatchedCore:
+    def make_core(self, num_envs: int, **env_kwargs: Any) -> Any:
         """A batched core of ``num_envs`` rows built from the env's keyword arguments."""
         return self.core_class()(num_envs=num_envs, **env_kwargs)
 
 
-#: Every environment of the library, by id: filled by ``envs.registration.register_env`` as each environment's
-#: package is imported (``import continuum_gym`` imports the library's own).
+#: Every environment of the library, by id: filled by ``register_env`` as each environment's package is imported
+#: (``import continuum_gym`` imports the library's own).
 ENV_SPECS: dict[str, EnvSpec] = {}
+#: The library's environment packages, imported (in this order) when ``continuum_gym`` is.
+BUILTIN_ENVS = ("continuum_gym.envs.occlusion", "continuum_gym.envs.view_tracking")
+
+ENV_IDS: list[str] = []
+
+
+def register_env(spec: EnvSpec) -> EnvSpec:
+    """Add an environment: its spec to ``ENV_SPECS``, its id (and goal id) to Gymnasium's registry.
+
+    Registering the same spec again is harmless; another spec under a taken id is an error.
+    """
+    if not isinstance(spec, EnvSpec):
+        raise ValueError(f"register_env takes an EnvSpec; got {type(spec).__name__}")
+    known = ENV_SPECS.get(spec.env_id)
+    if known is not None and known != spec:
+        raise ValueError(f"env id {spec.env_id!r} is already registered with another EnvSpec; pick another id")
+    ENV_SPECS[spec.env_id] = spec
+    if spec.env_id not in registry:
+        # No TimeLimit: each task truncates itself at its own duration (hold 150 steps, random 500-600,
+        # circle and the case studies 1000 at the default control_dt; a recording or another control_dt
+        # its own), so any registered bound would be wrong for some task. ``env.unwrapped.episode_steps``
+        # gives the current episode's length for clients that size buffers.
+        register(id=spec.env_id, entry_point=spec.entry_point, vector_entry_point=spec.vector_entry_point,
+                 max_episode_steps=None)
+    if spec.goal_id and spec.goal_id not in registry:  # goal-conditioned front end (HER); no vector version
+        register(id=spec.goal_id, entry_point=spec.goal_entry_point, max_episode_steps=None)
+    if spec.env_id not in ENV_IDS:
+        ENV_IDS.append(spec.env_id)
+    return spec
+
+
+def register_envs() -> list:
+    """Import the library's environment packages (each registers itself once); the registered ids."""
+    for package in BUILTIN_ENVS:
+        importlib.import_module(package)
+    return ENV_IDS
+
+
 
 
 def get_spec(env_id: str) -> EnvSpec:
@@ -227,5 +213,6 @@ def _registered(env_id: str):
     return registry.get(env_id)
 
 
-__all__ = ["EnvSpec", "Metric", "EpisodeMetric", "TaskSet", "ReferenceRow", "ENV_SPECS", "get_spec",
-           "registered_kwargs", "registered_base"]
+__all__ = ["EnvSpec", "Metric", "EpisodeMetric", "ENV_SPECS", "ENV_IDS", "BUILTIN_ENVS", "register_env",
+           "register_envs", "get_spec", "registered_kwargs", "registered_base",
+           "REGISTER_HINT"]

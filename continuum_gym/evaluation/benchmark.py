@@ -24,8 +24,9 @@ import platform
 import subprocess
 from pathlib import Path
 
+from continuum_gym.envs.benchmark import TaskSet, benchmark_of
 from continuum_gym.envs.config import TASK_SPLITS
-from continuum_gym.envs.spec import EnvSpec, TaskSet
+from continuum_gym.envs.spec import EnvSpec
 
 PROTOCOL_VERSION = "benchmark-v1"
 #: Splits an evaluation may run on: ``validation`` for model selection, ``test`` for final numbers only.
@@ -40,9 +41,9 @@ def task_sets(spec: EnvSpec, split: str) -> tuple[TaskSet, ...]:
         raise ValueError(f"split must be one of {list(EVALUATION_SPLITS)} (train tasks are for training), "
                          f"got {split!r}")
     if split == "test":
-        return spec.task_sets
+        return benchmark_of(spec).task_sets
     test_only = set(spec.config_class.test_only_tasks)
-    return tuple(t for t in spec.task_sets if t.task not in test_only)
+    return tuple(t for t in benchmark_of(spec).task_sets if t.task not in test_only)
 
 
 def episode_count(task_set: TaskSet, episodes: int, grid: int) -> int:

@@ -15,6 +15,7 @@ from typing import Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import EnvSpec
 
 #: The key of a learned row's probability of improvement in the table (and the JSON).
@@ -27,7 +28,7 @@ WALL_CLOCK_FILE = "wall_clock.csv"
 def headline_scores(spec: EnvSpec, results: dict, method: str) -> np.ndarray:
     """(runs, episodes) of ``spec.headline_metric`` over ``method``'s non-grid task sets, in task-set order."""
     tasks = [t for t in results[method].values() if not t["grid"]]
-    return np.concatenate([np.stack(t["scores"][spec.headline_metric]) for t in tasks], axis=1)
+    return np.concatenate([np.stack(t["scores"][benchmark_of(spec).headline_metric]) for t in tasks], axis=1)
 
 
 def _improvement(x: np.ndarray, y: np.ndarray) -> float:
@@ -72,17 +73,17 @@ def probability_of_improvement(x: ArrayLike, y: ArrayLike, higher_is_better: boo
 def add_improvement(spec: EnvSpec, table: dict, results: dict, learned: list) -> None:
     """``table[m][IMPROVEMENT]`` for each learned method ``m`` in ``learned``: P(m better than the headline
     baseline) on the headline metric per episode (non-grid task sets)."""
-    baseline = spec.headline_baseline
+    baseline = benchmark_of(spec).headline_baseline
     if baseline not in results:
         return
-    higher = spec.metric(spec.headline_metric).higher_is_better
+    higher = spec.metric(benchmark_of(spec).headline_metric).higher_is_better
     reference = headline_scores(spec, results, baseline)
     for method in learned:
         if method not in results or method not in table:
             continue
         estimate = probability_of_improvement(headline_scores(spec, results, method), reference, higher)
         table[method][IMPROVEMENT] = {**estimate, "over": baseline,
-                                      "on": f"{spec.headline_metric} per episode, non-grid test task sets"}
+                                      "on": f"{benchmark_of(spec).headline_metric} per episode, non-grid test task sets"}
 
 
 def training_cost(run_dir: str | Path) -> dict[str, float | None]:
@@ -131,9 +132,9 @@ def comparison_markdown(spec: EnvSpec, table: dict) -> str:
     rows = [(m, row) for m, row in table.items() if IMPROVEMENT in row or TRAINING in row]
     if not rows:
         return ""
-    direction = "higher" if spec.metric(spec.headline_metric).higher_is_better else "lower"
-    lines = [f"Learned rows against `{spec.headline_baseline}`: probability of improvement P(row's "
-             f"{spec.headline_metric} {direction} than the baseline's on the same episode) [95 % CI], and training "
+    direction = "higher" if spec.metric(benchmark_of(spec).headline_metric).higher_is_better else "lower"
+    lines = [f"Learned rows against `{benchmark_of(spec).headline_baseline}`: probability of improvement P(row's "
+             f"{benchmark_of(spec).headline_metric} {direction} than the baseline's on the same episode) [95 % CI], and training "
              "cost per run:", "",
              "| method | algo | seeds | P(improvement) | env steps per run | wall-clock per run (s) |",
              "|---|---|---|---|---|---|"]

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import (
     ENV_SPECS,
     EnvSpec,
@@ -118,7 +119,7 @@ def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
     (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
     """
     source = config.get("env_config") or config.get("env_kwargs") or {}
-    picked = {key: value for key, value in source.items() if key in spec.policy_keys}
+    picked = {key: value for key, value in source.items() if key in benchmark_of(spec).policy_keys}
     spec.config_class.from_kwargs(**picked)  # the same checks as the env's: a broken config fails here, named
     return picked
 
@@ -138,7 +139,7 @@ def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict
     except ValueError as error:
         raise type(error)(f"env_kwargs (--env-kwargs): {error}") from None
     ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
-    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in spec.policy_keys}
+    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in benchmark_of(spec).policy_keys}
     return env_kwargs, policy, ignored
 
 
@@ -164,7 +165,7 @@ def own_bases(spec: EnvSpec, env_id: str, methods: list, environment: dict | Non
     """The registered controllers in play: the env's packaged bases (fitted to the paper's robots: only when
     ``environment`` changes none of ``spec.physics``), the id's own base and those the learned methods were
     trained on."""
-    nominal = not any(key in (environment or {}) for key in spec.physics)
+    nominal = not any(key in (environment or {}) for key in benchmark_of(spec).physics)
     candidates = [*(spec.config_class.packaged_controllers if nominal else ()), registered_base(env_id)]
     candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
     return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
@@ -247,7 +248,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
                                   f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
                                   f"{robot}); pass the keywords it was trained with "
                                   "(--env-kwargs, or its registered id with --import)")
-            result = run_episodes(core, policy, np.arange(count), record=task_set.task == spec.trace_task)
+            result = run_episodes(core, policy, np.arange(count), record=task_set.task == benchmark_of(spec).trace_task)
         except PolicyError as error:
             failed.add(name)
             skipped[f"{name}[{index}]"] = str(error)
@@ -258,7 +259,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         for key, value in result.items():
             if not key.startswith("trace_"):
                 entry["scores"].setdefault(key, []).append(np.asarray(value))
-        if task_set.task == spec.trace_task:
+        if task_set.task == benchmark_of(spec).trace_task:
             entry["traces"].append({k: v[:, 0] for k, v in result.items() if k.startswith("trace_")})
     for name in failed:  # a method is compared on every task set of every run, or not at all
         results.pop(name, None)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import EnvSpec, Metric, get_spec
 
 #: What a per-step trace value is, for axis labels: (words, higher is better).
@@ -34,7 +35,7 @@ def _pyplot():
 def draw_distributions(spec: EnvSpec, results: dict, table: dict, path: Path, split: str = "test") -> Path:
     """Box plots of the headline metric per method (all seeds x non-grid episodes), optimum as a line."""
     plt = _pyplot()
-    metric = spec.metric(spec.headline_metric)
+    metric = spec.metric(benchmark_of(spec).headline_metric)
     fig, ax = plt.subplots(figsize=(9, 4.5))
     labels, data = [], []
     for method, tasks in results.items():
@@ -65,10 +66,10 @@ def draw_traces(spec: EnvSpec, results: dict, path: Path, control_dt: float = 0.
     """The per-step trace of the paper task of ``spec.trace_task``, first seed of each method (None, and no file,
     when no method ran that task: it is not in the evaluated split)."""
     plt = _pyplot()
-    key = f"trace_{spec.trace_value}"
-    words, higher = TRACE_LABELS.get(spec.trace_value, (spec.trace_value, True))
-    drawn = {method: tasks[spec.trace_task] for method, tasks in results.items()
-             if tasks.get(spec.trace_task) and tasks[spec.trace_task]["traces"]}
+    key = f"trace_{benchmark_of(spec).trace_value}"
+    words, higher = TRACE_LABELS.get(benchmark_of(spec).trace_value, (benchmark_of(spec).trace_value, True))
+    drawn = {method: tasks[benchmark_of(spec).trace_task] for method, tasks in results.items()
+             if tasks.get(benchmark_of(spec).trace_task) and tasks[benchmark_of(spec).trace_task]["traces"]}
     if not drawn:  # the trace task is not in this split (the circle is test-only): no empty figure
         return None
     fig, ax = plt.subplots(figsize=(9, 4.5))
@@ -82,7 +83,7 @@ def draw_traces(spec: EnvSpec, results: dict, path: Path, control_dt: float = 0.
             ax.annotate(f"{method} ended at {time[ended[0]]:.2f} s", (time[ended[0]], ax.get_ylim()[1]),
                         fontsize=7, rotation=90, va="top", ha="right", color=line.get_color())
     ax.set(xlabel="time (s)", ylabel=f"{words}, {_direction(higher)}",
-           title=f"{spec.short_name}: {spec.trace_task} task, first seed (a dotted line marks an episode that "
+           title=f"{spec.short_name}: {benchmark_of(spec).trace_task} task, first seed (a dotted line marks an episode that "
                  "ended early)")
     ax.legend(fontsize=8)
     fig.tight_layout()
@@ -162,7 +163,7 @@ def learning_curves(policies: dict, env_id: str, metric: str) -> dict:
 def draw_learning_curves(spec: EnvSpec, policies: dict, path: Path, env_id: str | None = None) -> Path | None:
     """Validation headline metric of each learned row, mean over its seeds with a 95 % bootstrap CI, against
     environment steps and, when the runs record it (``wall_clock.csv``), against wall-clock seconds."""
-    metric = spec.metric(spec.headline_metric)
+    metric = spec.metric(benchmark_of(spec).headline_metric)
     curves = learning_curves(policies, env_id or spec.env_id, metric.name)
     if not curves:
         return None
@@ -202,7 +203,7 @@ def draw_performance_profiles(spec: EnvSpec, results: dict, path: Path, reps: in
 
     from continuum_gym.evaluation.comparison import headline_scores
 
-    metric = spec.metric(spec.headline_metric)
+    metric = spec.metric(benchmark_of(spec).headline_metric)
     scores = {method: headline_scores(spec, results, method) for method in results}
     if not scores:
         return None
@@ -237,7 +238,7 @@ def draw(env_id: str, results: dict, table: dict, policies: dict, out: Path, spl
     spec = get_spec(env_id)
     short = env_id.split("/")[-1].rsplit("-v", 1)[0]  # a registered variant's figures carry its own name
     paths = [draw_distributions(spec, results, table, out / f"{short}_distribution.png", split),
-             draw_traces(spec, results, out / f"{short}_{spec.trace_task}_trace.png"),
+             draw_traces(spec, results, out / f"{short}_{benchmark_of(spec).trace_task}_trace.png"),
              draw_coverage_maps(spec, results, table, out / f"{short}_coverage_maps.png"),
              draw_learning_curves(spec, policies, out / f"{short}_learning_curves.png", env_id),
              draw_performance_profiles(spec, results, out / f"{short}_performance_profiles.png")]

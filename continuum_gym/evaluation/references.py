@@ -15,8 +15,10 @@ import os
 import sys
 from pathlib import Path
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import EnvSpec
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH as SHIPPED
+from continuum_gym.evaluation.optimum.optima import optimum_of
 
 
 def cache_directory() -> Path:
@@ -28,7 +30,7 @@ def cache_directory() -> Path:
 def physics(spec: EnvSpec, env_kwargs: dict) -> dict:
     """The plain values of the fields the ceiling depends on, for the env built from ``env_kwargs``."""
     config = spec.config_class.from_kwargs(**env_kwargs).to_dict()
-    return {name: config[name] for name in spec.physics}
+    return {name: config[name] for name in benchmark_of(spec).physics}
 
 
 def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int = 32, grid: int = 21,
@@ -41,16 +43,16 @@ def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int
     instances with an optimum; the coverage grid is a test-only task.
     """
     env_kwargs = dict(env_kwargs or {})
-    if not spec.physics or not spec.optimum:
+    if not benchmark_of(spec).physics or optimum_of(spec.env_id) is None:
         return None  # no optimum is known for the env
     mine = physics(spec, env_kwargs)
     if split == "test" and mine == physics(spec, {}):
         return json.loads(SHIPPED.read_text()) if SHIPPED.exists() else None
     # a test-only task (a grid) has no instances in the other splits
-    if split != "test" and all(row.task in spec.config_class.test_only_tasks for row in spec.references):
+    if split != "test" and all(row.task in spec.config_class.test_only_tasks for row in benchmark_of(spec).references):
         return None
-    size = grid if any(task_set.grid for task_set in spec.task_sets if task_set.task in
-                       {row.task for row in spec.references}) else episodes
+    size = grid if any(task_set.grid for task_set in benchmark_of(spec).task_sets if task_set.task in
+                       {row.task for row in benchmark_of(spec).references}) else episodes
     digest = hashlib.sha256(json.dumps({"env": spec.env_id, "physics": mine, "size": size, "split": split},
                                        sort_keys=True, default=str).encode()).hexdigest()[:16]
     path = cache_directory() / f"{spec.short_name}-{digest}.json"
@@ -71,5 +73,7 @@ def load_references(spec: EnvSpec, env_kwargs: dict | None = None, episodes: int
 def _compute(spec: EnvSpec, env_kwargs: dict, episodes: int, grid: int, split: str, progress: bool,
              workers: int) -> dict:
     config = spec.config_class.from_kwargs(**env_kwargs)
-    return spec.hook("optimum")(config, episodes=episodes, grid=grid, split=split, progress=progress,
-                                workers=workers)
+    compute = optimum_of(spec.env_id)
+    if compute is None:
+        raise ValueError(f"{spec.env_id} has no offline optimum (continuum_gym.evaluation.optimum.register_optimum)")
+    return compute(config, episodes=episodes, grid=grid, split=split, progress=progress, workers=workers)

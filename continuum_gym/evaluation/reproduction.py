@@ -188,7 +188,7 @@ def reproduce(quick: bool = False, grid: int | None = None, progress: bool = Tru
     return results
 def warm_up_occlusion() -> None:
     """The robot's and the baselines' batched Python API, as ``continuum-gym reproduce`` calls them
-    (``EnvSpec.warm_ups``: ``continuum-gym precompile`` compiles them)."""
+    (``warm_ups``: ``continuum-gym precompile`` compiles them)."""
     from continuum_gym.robots import MultiBackboneRobot
 
     robot = MultiBackboneRobot()
@@ -207,4 +207,12 @@ def warm_up_view() -> None:
     overlap_ratio(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3))  # one pair, then a batch
     overlap_ratio(np.zeros((2, 3)), np.eye(3), np.zeros(3), np.eye(3))
 
+
+def warm_ups(env_id: str) -> tuple:
+    """The library calls ``continuum-gym reproduce`` makes for ``env_id``'s robots (none for another env), which
+    ``continuum-gym precompile`` makes once so that their kernels are in the precompiled set."""
+    from continuum_gym.envs.occlusion.spec import ENV_ID as OCCLUSION
+    from continuum_gym.envs.view_tracking.spec import ENV_ID as VIEW
+
+    return {OCCLUSION: (warm_up_occlusion,), VIEW: (warm_up_view,)}.get(env_id, ())
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import EnvSpec, Metric, get_spec
 
 #: headroom_closed, computed for learned methods, is better when higher.
@@ -67,7 +68,7 @@ def reference_rows(spec: EnvSpec, results: dict, optimum: dict, grid: int | None
     from continuum_gym.evaluation.statistics import summarize
 
     rows: dict = {}
-    for ref in spec.references:
+    for ref in benchmark_of(spec).references:
         cached = optimum.get(ref.cache_key)
         if not cached or ref.values not in cached:
             continue
@@ -98,12 +99,16 @@ def method_value(spec: EnvSpec, results: dict, method: str, task: str, metric_na
 
 
 def add_headroom(spec: EnvSpec, table: dict, results: dict, bases: dict | None = None) -> None:
-    """headroom_closed = (method - base) / (optimum - base) for every learned method, on ``spec.headroom``.
+    """headroom_closed = (method - base) / (optimum - base) for every learned method, on the benchmark's
+    ``headroom`` (none where it declares none).
 
     A method's base is the controller it was trained on (``bases``), when that controller has a row;
     otherwise, and for pure RL, the env's headline baseline. Analytic rows (``bases[m] == m``) get none.
     """
-    task, metric = spec.headroom
+    headroom = benchmark_of(spec).headroom
+    if headroom is None:
+        return
+    task, metric = headroom
     bases = bases or {}
     if "offline_optimum" not in table or metric not in table["offline_optimum"]:
         return
@@ -113,7 +118,7 @@ def add_headroom(spec: EnvSpec, table: dict, results: dict, bases: dict | None =
             continue
         base = bases.get(method)
         if base is None or base not in results:
-            base = spec.headline_baseline
+            base = benchmark_of(spec).headline_baseline
         if base not in results or task not in results[base]:
             continue
         reference = method_value(spec, results, base, task, metric)
@@ -141,7 +146,7 @@ def markdown(env_id: str, table: dict, results: dict) -> str:
                 cells.append(f"{fmt(spec, name, s['mean'])} [{fmt(spec, name, s['ci_low'])}, "
                              f"{fmt(spec, name, s['ci_high'])}] (IQM {fmt(spec, name, s['iqm'])})")
         lines.append(f"| {method} | " + " | ".join(cells) + " |")
-    columns = [m.name for m in spec.metrics if not m.grid_metric][:3] + list(spec.diagnostics)
+    columns = [m.name for m in spec.metrics if not m.grid_metric][:3] + list(benchmark_of(spec).diagnostics)
     lines += ["", "Per task set (mean over seeds and episodes):", "",
               "| method | task | " + " | ".join(columns) + " |", "|---|---|" + "---|" * len(columns)]
     for method, tasks in results.items():

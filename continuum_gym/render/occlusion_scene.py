@@ -32,7 +32,6 @@ from continuum_gym.render.scene import (
 )
 
 if TYPE_CHECKING:
-    from continuum_gym.envs.occlusion import OcclusionCore
     from continuum_gym.robots import MultiBackboneRobot
 
 
@@ -180,11 +179,11 @@ class OcclusionScene(Scene):
 
     # ------------------------------------------------------------------ state
     @classmethod
-    def from_core(cls, core: OcclusionCore) -> OcclusionScene:
+    def from_core(cls, core: Any) -> OcclusionScene:
         """The scene of an OcclusionAvoidance core: its robot and cone."""
         return cls(robot=core.robot, cone=core.cone)
 
-    def show_row(self, core: OcclusionCore, row: int) -> None:
+    def show_row(self, core: Any, row: int) -> None:
         """Move the bodies to row ``row`` of ``core``: its joints and endoscope rotation."""
         self.update(core.q[row], core.gamma[row])
 

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import ENV_SPECS, get_spec, registered_kwargs
 from continuum_gym.validation import as_finite, integer, number
 
@@ -152,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
     try:
-        task = args.task or registered_kwargs(args.env).get("task") or spec.record_task  # a registered id's own
+        task = args.task or registered_kwargs(args.env).get("task") or benchmark_of(spec).record_task  # a registered id's own
         env = gym.make(args.env, task=task, task_split="test", render_mode="rgb_array", **env_kwargs)
     except ValueError as error:  # --task, or a policy's env kwargs, refused by the env
         print(f"continuum-gym render: --task / policy env kwargs: {error}", file=sys.stderr)
@@ -172,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         action = (np.zeros(env.action_space.shape, np.float32)  # type: ignore[type-var]  # a Box: shape is set
                   if model is None else model.predict(obs, deterministic=True)[0])
         _, _, terminated, truncated, info = env.step(action)
-        history.append(info[spec.record_value])
+        history.append(info[benchmark_of(spec).record_value])
         step += 1
         bar.update()
         done = terminated or truncated or bool(steps and step >= steps)
@@ -198,5 +199,5 @@ def run(args: argparse.Namespace) -> int:
         imageio.mimsave(out, frames, fps=fps)  # type: ignore[arg-type]  # list[ArrayLike] is invariant; read only
     env.close()
     what = f"the state after step {step}" if still else f"{len(frames)} frames"
-    print(f"wrote {out}: {what}, mean {spec.record_value} {np.mean(history):.3f}")
+    print(f"wrote {out}: {what}, mean {benchmark_of(spec).record_value} {np.mean(history):.3f}")
     return 0

@@ -27,7 +27,6 @@ from continuum_gym.render.scene import (
 )
 
 if TYPE_CHECKING:
-    from continuum_gym.envs.view_tracking import ViewTrackingCore
     from continuum_gym.geometry.frustum import Frustum
     from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
@@ -135,11 +134,11 @@ class ViewTrackingScene(Scene):
         self._ids = self._stem + self._links + self._davinci + self._frusta["endoscope"] + self._frusta["davinci"]
 
     @classmethod
-    def from_core(cls, core: ViewTrackingCore) -> ViewTrackingScene:
+    def from_core(cls, core: Any) -> ViewTrackingScene:
         """The scene of a ViewTracking core: its continuum endoscope, da Vinci and frustum."""
         return cls(endoscope=core.robot, davinci=core.davinci, frustum=core.frustum)
 
-    def show_row(self, core: ViewTrackingCore, row: int) -> None:
+    def show_row(self, core: Any, row: int) -> None:
         """Move the bodies to row ``row`` of ``core``: its joints and the da Vinci's configuration."""
         self.update(core.q[row], core.davinci_configuration(row))
 

@@ -162,8 +162,9 @@ class writing_precompiled:
 class PrecompiledFirstCache(FunctionCache):
     """numba's per-function cache, consulted after the precompiled set (see the module docstring)."""
 
-    def __init__(self, py_func: Callable) -> None:
+    def __init__(self, py_func: Callable, cache_key: Callable[[Any], bytes] | None = None) -> None:
         super().__init__(py_func)
+        self._cache_key = cache_key
         self._module_dir = py_func.__module__.replace(".", "-")
         # numba names its entries <module>.<qualname>-<first line>: in the set, without the line, so that
         # code moving within its file keeps its entries (the index key holds the bytecode's hash anyway).
@@ -171,6 +172,17 @@ class PrecompiledFirstCache(FunctionCache):
         self._filename_base = f"{py_func.__module__}.{qualname}-py{sys.version_info[0]}{sys.version_info[1]}"
         self._set_dir = precompiled_dir()
         self._layers: dict[str, IndexDataCacheFile] = {}
+
+    def _index_key(self, sig, codegen):
+        """numba's key (signature, CPU, the function's bytecode), and what ``cache_key`` says the compiled code
+        depends on beyond its own file (the library's batched loop: the env's row functions)."""
+        key = super()._index_key(sig, codegen)
+        if self._cache_key is None:
+            return key
+        from numba.core import sigutils
+
+        args, _ = sigutils.normalize_signature(sig)
+        return (*key[:2], (*key[2], hashlib.sha256(self._cache_key(args)).hexdigest()))
 
     def _layer(self, name: str) -> IndexDataCacheFile:
         if name not in self._layers:
@@ -270,10 +282,15 @@ def _announcer() -> Any:
 ANNOUNCER = _announcer()
 
 
-def kernel(func: Callable | None = None, *, borrows: bool = False, **options: Any) -> Any:
+def kernel(func: Callable | None = None, *, borrows: bool = False, cache_key: Callable[[Any], bytes] | None = None,
+           **options: Any) -> Any:
     """``numba.njit(cache=True, **options)`` whose compiled code also comes from the precompiled set.
 
     Use as ``@kernel`` or ``@kernel(inline="always")``; options are numba's.
+
+    ``cache_key(argument types) -> bytes`` adds to the kernel's cache key what its compiled code depends on
+    besides its own source file (numba checks only that file): the library's batched loop names the modules of
+    the row functions it inlines for those types (``envs/rows.py``).
 
     ``borrows=True`` compiles the kernel without numba's reference counting (numba's ``_nrt=False``):
     it only borrows the arrays it is passed, for the duration of the call. A kernel that calls another
@@ -297,7 +314,7 @@ def kernel(func: Callable | None = None, *, borrows: bool = False, **options: An
         # Should a future numba change it, kernels keep numba's own cache (tests/robots/test_compiled.py
         # fails then, so it does not go unnoticed).
         if isinstance(getattr(dispatcher, "_cache", None), FunctionCache):
-            dispatcher._cache = PrecompiledFirstCache(py_func)
+            dispatcher._cache = PrecompiledFirstCache(py_func, cache_key)
         return dispatcher
 
     return decorate if func is None else decorate(func)

@@ -71,6 +71,8 @@ def main(directory: str) -> int:
 def figure(data: dict) -> None:
     import matplotlib
 
+    from continuum_gym.envs.benchmark import benchmark_of
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -79,7 +81,7 @@ def figure(data: dict) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, env_id in zip(axes, COLUMNS):
         spec = get_spec(env_id)
-        metric = spec.metric(spec.headline_metric)
+        metric = spec.metric(benchmark_of(spec).headline_metric)
         scale = metric.display_scale
         for method, stats in data["none"][env_id].items():
             if not isinstance(stats, dict) or metric.name not in stats or method in REFERENCES:

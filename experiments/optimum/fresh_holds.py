@@ -35,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     import continuum_gym.envs.occlusion.tasks as occlusion_tasks
+    from continuum_gym.envs.benchmark import benchmark_of
     from continuum_gym.envs.spec import get_spec
     from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
     from continuum_gym.evaluation.optimum.occlusion import env_hold_test_optimum
@@ -52,11 +53,11 @@ def main(argv: list[str] | None = None) -> int:
         per = run_episodes(core, policy if policy is not None else ZeroResidual(core.single_action_space.shape[0]), ids)
         return {"voi": per["mean_voi"], "in_view": per["tip_in_view_fraction"]}
 
-    base = score(None, {"base_controller": spec.headline_baseline})
+    base = score(None, {"base_controller": benchmark_of(spec).headline_baseline})
     optimum = np.asarray(env_hold_test_optimum(args.tasks, workers=2, progress=True, split=SPLIT)["optimum_voi"],
                          dtype=float)
     rows = {"projected_gradient": base}
-    for run in sorted(args.policies.glob(f"*_{spec.headline_baseline}_seed*")):
+    for run in sorted(args.policies.glob(f"*_{benchmark_of(spec).headline_baseline}_seed*")):
         model, config = load_policy(run)
         rows[run.name] = score(model, policy_env_kwargs(spec, config))
     base_voi, optimum_voi = float(np.mean(base["voi"])), float(np.nanmean(optimum))

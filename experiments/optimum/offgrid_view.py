@@ -6,7 +6,7 @@ region, drawn at random), ids 0 to ``--count`` - 1, and reports the same share, 
 next to the 21 x 21 grid's figure computed here in the same way. Test split: run once per shipped candidate.
 
     PYTHONPATH=. python experiments/optimum/offgrid_view.py continuum_gym/agents/policies/ViewTracking-v0/*dimension*
-    PYTHONPATH=. python experiments/optimum/offgrid_view.py --base continuum_gym.agents.distilled_view:distilled_optimum
+    PYTHONPATH=. python experiments/optimum/offgrid_view.py --base continuum_gym.envs.view_tracking.distilled:distilled_optimum
 """
 
 from __future__ import annotations

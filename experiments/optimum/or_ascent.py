@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.envs.view_tracking.core import ACTION_SCALE
+from continuum_gym.envs.view_tracking.env import ACTION_SCALE
 from continuum_gym.envs.view_tracking.outputs import OBS
 from continuum_gym.envs.view_tracking.polish import observed_camera
 from continuum_gym.geometry.overlap_clipping import make_overlap_work, overlap_ratio_in

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import minimize
 
-from continuum_gym.baselines.registry import make_controller
+from continuum_gym.baselines import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_THRESHOLD, coverage_grid
 from continuum_gym.baselines.view_tracking import ViewTrackingController, make_view_scratch, view_rates_kernel
 from continuum_gym.evaluation.optimum.view import (

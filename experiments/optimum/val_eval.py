@@ -60,11 +60,12 @@ def rollout(env_id: str, policy, env_kwargs: dict, task: str, count: int, first:
 
 def hold_optimum() -> float:
     """Mean offline-optimum VOI of validation hold ids 0-31 (library cache, computed once when missing)."""
+    from continuum_gym.envs.benchmark import benchmark_of
     from continuum_gym.envs.spec import get_spec
     from continuum_gym.evaluation.references import load_references
 
     spec = get_spec(OCC)
-    ref = next(r for r in spec.references if r.task == "hold")
+    ref = next(r for r in benchmark_of(spec).references if r.task == "hold")
     cache = load_references(spec, {}, 32, 21, SPLIT, progress=False, workers=1)
     return float(np.mean(np.asarray(cache[ref.cache_key][ref.values], dtype=float)[:32]))
 
@@ -106,9 +107,9 @@ def occ_reference(root: Path) -> dict:
     path = root / "results" / "occ_reference.json"
     if path.exists():
         return json.loads(path.read_text())
-    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.envs.benchmark import benchmark_of
 
-    base = get_spec(OCC).headline_baseline
+    base = benchmark_of(OCC).headline_baseline
     summary, _ = measure(OCC, None, {"base_controller": base})
     out = {"base": base, "base_hold_voi": summary["hold_voi"], "base_mean_voi": summary["mean_voi"],
            "optimum_hold_voi": hold_optimum(), "split": SPLIT}
@@ -180,7 +181,9 @@ def main(argv: list[str] | None = None) -> int:
         start = time.time()
         if target is None:
             env_id = args.base
-            kwargs = {"base_controller": args.base_controller or get_spec(env_id).headline_baseline}
+            from continuum_gym.envs.benchmark import benchmark_of
+
+            kwargs = {"base_controller": args.base_controller or benchmark_of(env_id).headline_baseline}
             if args.polish is not None:
                 kwargs.update(overlap_polish=args.polish, residual_scale=3.0)
             model, run, step, name = None, None, None, "base"

@@ -1,6 +1,6 @@
 """Issue 38, Campaign 12: the ViewTracking base that steers to a distilled smooth optimum, as a plug-in.
 
-Registers ``distilled_optimum``: the package's controller (``continuum_gym.agents.distilled_view``, which says
+Registers ``distilled_optimum``: the package's controller (``continuum_gym.envs.view_tracking.distilled``, which says
 what it does) with the weights named by ``VT_DISTILLED_NET`` (default: the package's) and the gain and rate cap
 of ``VT_DISTILLED_GAIN`` / ``VT_DISTILLED_CAP`` (default the package's 40 1/s and 10 action units), so that
 ``continuum-gym --import vt_distilled train/evaluate`` and the campaign scripts take other fits. Run as a
@@ -23,10 +23,10 @@ NAME = "distilled_optimum"
 
 
 def register(gain: float | None = None, cap: float | None = None, ascent: float | None = None) -> None:
-    """The package's controller (``continuum_gym.agents.distilled_view``) with ``VT_DISTILLED_NET``'s weights;
+    """The package's controller (``continuum_gym.envs.view_tracking.distilled``) with ``VT_DISTILLED_NET``'s weights;
     without its OR lookahead unless ``VT_DISTILLED_ASCENT`` says (Campaign 12's runs (a), (a2) trained on that)."""
-    from continuum_gym.agents.distilled_view import CAP, GAIN, WEIGHTS
-    from continuum_gym.agents.distilled_view import register as register_distilled
+    from continuum_gym.envs.view_tracking.distilled import CAP, GAIN, WEIGHTS
+    from continuum_gym.envs.view_tracking.distilled import register as register_distilled
 
     gain = float(os.environ.get("VT_DISTILLED_GAIN", GAIN)) if gain is None else gain
     cap = float(os.environ.get("VT_DISTILLED_CAP", CAP)) if cap is None else cap

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from continuum_gym.agents.distilled_view import decode, encode  # the encoding the shipped network uses
+from continuum_gym.envs.view_tracking.distilled import decode, encode  # the encoding the shipped network uses
 
 VIEW = "ContinuumGym/ViewTracking-v0"
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from vt_label_fit import fit_mlp, local_ascent, score
 
-from continuum_gym.agents.distilled_view import decode, encode
-from continuum_gym.agents.distilled_view import network_inputs as inputs
+from continuum_gym.envs.view_tracking.distilled import decode, encode
+from continuum_gym.envs.view_tracking.distilled import network_inputs as inputs
 
 VIEW = "ContinuumGym/ViewTracking-v0"
 

@@ -37,7 +37,7 @@ import numpy as np
 from residual_reach import HOLD_MARGIN, PENALTY, HoldEffort, holdable_optimum
 from scipy.optimize import minimize
 
-from continuum_gym.baselines.registry import make_controller
+from continuum_gym.baselines import make_controller
 from continuum_gym.baselines.scenarios import COVERAGE_INSERTION, COVERAGE_THRESHOLD
 from continuum_gym.evaluation.optimum.view import overlap_of_configuration, view_tracking_optimum
 from continuum_gym.geometry.frustum import Frustum

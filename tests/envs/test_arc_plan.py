@@ -10,7 +10,7 @@ import pytest
 from continuum_gym.baselines.arc_plan import hold_arc_plan
 from continuum_gym.envs.columns import at
 from continuum_gym.envs.occlusion.config import OcclusionConfig
-from continuum_gym.envs.occlusion.core import OcclusionCore
+from continuum_gym.envs.occlusion.env import OcclusionCore
 from continuum_gym.envs.occlusion.outputs import OBS, Metric
 
 GUARD = 0.69

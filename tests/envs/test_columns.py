@@ -124,8 +124,8 @@ def test_every_view_tracking_block_holds_what_it_declares():
 
 
 def test_the_env_docstrings_carry_the_declared_tables():
-    from continuum_gym.envs.occlusion.core import OcclusionAvoidanceEnv
-    from continuum_gym.envs.view_tracking.core import ViewTrackingEnv
+    from continuum_gym.envs.occlusion.env import OcclusionAvoidanceEnv
+    from continuum_gym.envs.view_tracking.env import ViewTrackingEnv
 
     assert occ.OBSERVATION.table(3) in OcclusionAvoidanceEnv.__doc__
     assert view.OBSERVATION.table() in ViewTrackingEnv.__doc__

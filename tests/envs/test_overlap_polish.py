@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
-from continuum_gym.envs.view_tracking.core import ViewTrackingCore
+from continuum_gym.envs.view_tracking.env import ViewTrackingCore
 from continuum_gym.envs.view_tracking.outputs import Metric
 from continuum_gym.envs.view_tracking.polish import POLISH_MIN_OR
 

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from rliable import metrics
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import get_spec
 from continuum_gym.evaluation.comparison import (
     IMPROVEMENT,
@@ -78,7 +79,7 @@ def test_reference_runs_hold_every_row_of_the_table_with_curves_and_wall_clock()
 def test_learning_curves_of_the_reference_runs_against_steps_and_wall_clock(tmp_path):
     spec = get_spec(VIEW)
     policies = discover_policies(REFERENCE)
-    curves = learning_curves(policies, VIEW, spec.headline_metric)
+    curves = learning_curves(policies, VIEW, benchmark_of(spec).headline_metric)
     assert set(curves) == set(ROWS[VIEW])
     steps, values, elapsed = curves["residual_dimension_reduced_sac"]
     assert values.shape == elapsed.shape == (5, len(steps)) and steps[-1] == 1_000_000

@@ -9,6 +9,7 @@ import pytest
 from matplotlib.figure import Figure
 
 import continuum_gym  # noqa: F401  (registers the ids)
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import ENV_SPECS, get_spec
 from continuum_gym.evaluation.figures import draw, draw_learning_curves
 
@@ -22,9 +23,9 @@ def _results(spec, tasks, runs=2, episodes=4):
     for method in ("baseline", "residual"):
         results[method] = {}
         for task in tasks:
-            traces = [{f"trace_{spec.trace_value}": rng.random(50)} for _ in range(runs)] \
-                if task == spec.trace_task else []
-            results[method][task] = {"scores": {spec.headline_metric: [rng.random(episodes) for _ in range(runs)]},
+            traces = [{f"trace_{benchmark_of(spec).trace_value}": rng.random(50)} for _ in range(runs)] \
+                if task == benchmark_of(spec).trace_task else []
+            results[method][task] = {"scores": {benchmark_of(spec).headline_metric: [rng.random(episodes) for _ in range(runs)]},
                                      "traces": traces, "grid": False}
     return results
 
@@ -34,20 +35,20 @@ def test_a_split_without_the_trace_task_writes_no_trace_figure_and_no_legend_war
     titles, real_savefig = [], Figure.savefig
     monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: (titles.append(fig.axes[0].get_title()),
                                                                  real_savefig(fig, *a, **k))[1])
-    assert spec.trace_task in spec.config_class.test_only_tasks  # the circle is a test-only task
+    assert benchmark_of(spec).trace_task in spec.config_class.test_only_tasks  # the circle is a test-only task
     (tmp_path / "validation").mkdir()
     (tmp_path / "test").mkdir()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         written = draw(OCCLUSION, _results(spec, ["hold"]), {}, {}, tmp_path / "validation", "validation")
-    trace = f"OcclusionAvoidance_{spec.trace_task}_trace.png"
+    trace = f"OcclusionAvoidance_{benchmark_of(spec).trace_task}_trace.png"
     assert not (tmp_path / "validation" / trace).exists() and all(path.name != trace for path in written)
     assert not [w for w in caught if "No artists with labels" in str(w.message)]
     assert {path.name for path in written} == {"OcclusionAvoidance_distribution.png",
                                                "OcclusionAvoidance_performance_profiles.png"}
     assert "(held-out validation tasks)" in titles[0]  # the split evaluated, not "test"
     # On the test split the trace is there, with a line per method.
-    written = draw(OCCLUSION, _results(spec, ["hold", spec.trace_task]), {}, {}, tmp_path / "test")
+    written = draw(OCCLUSION, _results(spec, ["hold", benchmark_of(spec).trace_task]), {}, {}, tmp_path / "test")
     assert (tmp_path / "test" / trace) in written and (tmp_path / "test" / trace).stat().st_size > 0
 
 
@@ -61,7 +62,7 @@ def test_the_learning_curves_labels_lie_inside_the_figure(env_id, timed, tmp_pat
         run = tmp_path / f"run{seed}"
         run.mkdir()
         steps = np.arange(0, 1_000_001, 100_000)
-        np.savez(run / "evaluations.npz", timesteps=steps, **{spec.headline_metric: 0.2 + 0.01 * seed - 5e-8 * steps})
+        np.savez(run / "evaluations.npz", timesteps=steps, **{benchmark_of(spec).headline_metric: 0.2 + 0.01 * seed - 5e-8 * steps})
         if timed:
             (run / "wall_clock.csv").write_text("timesteps,elapsed_s\n" + "".join(f"{s},{s / 1e3}\n" for s in steps))
         runs.append(run)

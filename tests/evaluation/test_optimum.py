@@ -280,7 +280,7 @@ def test_optimum_of_a_variant_without_a_known_optimum_says_why_and_fails(monkeyp
 
     from continuum_gym.envs.spec import ENV_SPECS
 
-    spec = dataclasses.replace(ENV_SPECS[OCCLUSION_ID], env_id="MyTest/NoOptimum-v0", physics=(), optimum="")
+    spec = dataclasses.replace(ENV_SPECS[OCCLUSION_ID], env_id="MyTest/NoOptimum-v0")
     monkeypatch.setitem(ENV_SPECS, spec.env_id, spec)
     out, path = tmp_path / "figures", tmp_path / "optimum.json"
     assert _cli(["--env", spec.env_id, "--out", str(out), "--json", str(path), "--no-progress"]) == 1

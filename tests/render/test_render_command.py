@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from continuum_gym.cli import main
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import get_spec
 
 OCCLUSION = "ContinuumGym/OcclusionAvoidance-v0"
@@ -17,7 +18,7 @@ VIEW = "ContinuumGym/ViewTracking-v0"
 def _reference(env_id, steps, size, external_camera=None, seed=0):
     """Each camera's image of the state after ``steps`` zero actions, rendered directly through the scene."""
     spec = get_spec(env_id)
-    env = gym.make(env_id, task=spec.record_task, task_split="test", render_mode="rgb_array")
+    env = gym.make(env_id, task=benchmark_of(spec).record_task, task_split="test", render_mode="rgb_array")
     env.reset(seed=seed)
     for _ in range(steps):
         env.step(np.zeros(env.action_space.shape, np.float32))

@@ -1,20 +1,23 @@
 """OcclusionAvoidance (Sarli & Simaan): one package holds all of the environment.
 
-``config`` (its keyword arguments), ``tasks`` (its built-in task families), ``kernel`` and ``mismatch``
-(the compiled step, nominal and under a model error), ``core`` (the batched core and its Gymnasium front
-ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER front end) and ``spec``
-(what the rest of the library reads about it, registered when this package is imported). Names load on
+``config`` (its keyword arguments), ``outputs`` (the columns and the observation its rows write, declared
+once), ``kernel`` (its compiled row functions, nominal and under a model error) with ``plant`` (the model-error
+pieces), ``env`` (what a config builds for the rows, and the library's front ends of the env), ``tasks`` (its
+built-in task families), ``controller`` (how it calls a registered controller), ``goal`` (the HER front end)
+and ``spec`` (what the rest of the library reads about it, registered when this package is imported). Names load on
 first use, so importing the package registers the id without compiling anything.
 """
 
+from continuum_gym.envs.occlusion.benchmark import BENCHMARK
 from continuum_gym.envs.occlusion.spec import SPEC
 from continuum_gym.plugins import lazy_exports
 
 _EXPORTS = {
-    "OcclusionAvoidanceEnv": "core", "OcclusionAvoidanceVectorEnv": "core", "OcclusionCore": "core",
-    "INFO_FIELDS": "core", "OcclusionConfig": "config", "OcclusionAvoidanceGoalEnv": "goal",
+    "OcclusionAvoidanceEnv": "env", "OcclusionAvoidanceVectorEnv": "env", "OcclusionCore": "env",
+    "OcclusionConfig": "config", "OcclusionAvoidanceGoalEnv": "goal",
     "Metric": "outputs", "Flag": "outputs", "OBSERVATION": "outputs",
-    "REWARD_TERMS": "kernel", }
-__all__ = ["SPEC", *sorted(_EXPORTS)]
+    "REWARD_TERMS": "kernel",
+}
+__all__ = ["SPEC", "BENCHMARK", *sorted(_EXPORTS)]
 
 __getattr__ = lazy_exports(__name__, _EXPORTS)

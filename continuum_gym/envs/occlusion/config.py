@@ -38,6 +38,8 @@ class OcclusionConfig(EnvConfig):
     residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
     object_keywords: ClassVar[tuple] = ("robot", "cone", "model_error")
     task_module: ClassVar[str] = "continuum_gym.envs.occlusion.tasks"
+    #: the robots this env takes (``registry.register_robot`` checks a plug-in against it)
+    robot_class: ClassVar[str] = "continuum_gym.robots.mbcr:MultiBackboneRobot"
     trajectory_class: ClassVar[str] = "continuum_gym.envs.trajectories:TipTrajectory"
     builtin_tasks: ClassVar[tuple] = TASKS
     test_only_tasks: ClassVar[tuple] = TEST_ONLY

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -11,19 +11,12 @@ from continuum_gym.envs.goal import GOAL_DIM, ContinuumGoalEnv, pose_goal, split
 from continuum_gym.envs.occlusion.config import OcclusionConfig
 from continuum_gym.validation import positive
 
-if TYPE_CHECKING:
-    from continuum_gym.envs.occlusion.core import OcclusionCore
-
 ENV_ID = OcclusionConfig.env_id
 
 
 class OcclusionAvoidanceGoalEnv(ContinuumGoalEnv):
     __doc__ = goal.__doc__
     base_id = ENV_ID
-
-    if TYPE_CHECKING:  # the base env's core is this env's
-        @property
-        def core(self) -> OcclusionCore: ...
 
     goal_dim = GOAL_DIM + 1  # the pose and the state's VOI
     goal_keywords = ("reward_type", "tolerance_m", "tolerance_rad")

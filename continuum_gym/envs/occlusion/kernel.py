@@ -1,17 +1,21 @@
-"""One compiled call per environment step of OcclusionAvoidance, for the whole batch.
+"""OcclusionAvoidance's rows: what one robot does in a control step, and what is observed of it.
 
-Per control step and robot: for each kinematic substep, the baseline command at the current state
+The library runs these row functions for the whole batch in one compiled call (``envs/rows.py``). Per
+control step and robot: for each kinematic substep, the baseline command at the current state
 (its cached value for the first substep), plus the residual (projected into the tip Jacobian's null
 space unless ``residual_space="joint"``), saturated by the rate limits (uniform scaling of the joint
 rates; gamma rate clipped), integrated by explicit Euler and clamped to the position limits. Then
 the geometry once at the new state: tip errors, VOI, tip visibility, the next baseline command, the
 observation and the reward terms.
 
-Every kernel takes a few named bundles: the batch ``OcclusionState`` (q, gamma, step counters),
-the ``TaskArrays``, the robot's and the controller's ``kernel_args`` bundles, the env's
-``OcclusionStepParams`` and the ``OcclusionOutputs`` it fills. The observation's layout and the
-columns of ``metrics``, ``flags`` and ``base_info`` are declared once, in ``outputs`` (``OBS``,
-``Metric``, ``Flag``, ``BaseInfo``).
+The row functions take the library's bundles (``envs/core.py``): the batch ``OcclusionState`` (q, gamma,
+step counters), the ``TaskArrays``, ``model`` = (the robot's, the controller's ``kernel_args``), the env's
+``OcclusionStepParams``, the registered controller's slot (or None), the thread's work, the
+``OcclusionOutputs`` they fill and ``plant``: the model-error arrays, or None. Under a model error the same
+step, observation and metric code runs with the plant's pieces (``occlusion.plant``): the controller at the
+measured joints, the true robot moving and scored. The observation's layout and the columns of
+``metrics``, ``flags`` and ``base_info`` are declared once, in ``outputs`` (``OBS``, ``Metric``, ``Flag``,
+``BaseInfo``).
 """
 
 from __future__ import annotations
@@ -26,16 +30,15 @@ from continuum_gym.baselines.occlusion_kernels import (
     occlusion_rates_kernel,
     wrap_angle,
 )
-from continuum_gym.envs.columns import at
 from continuum_gym.envs.common_kernels import (
-    OBSERVE_ONLY,
+    at,
     clamp,
     clip_observation,
     desired_point,
     desired_rotation,
-    mark_non_finite,
-    mark_non_finite_reward,
 )
+from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
+from continuum_gym.envs.model_error import MISMATCH_TIP_EXACT
 from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
 from continuum_gym.envs.occlusion.outputs import (
     OBS,
@@ -47,7 +50,8 @@ from continuum_gym.envs.occlusion.outputs import (
     Flag,
     Metric,
 )
-from continuum_gym.envs.row_claims import first_rows, next_rows
+from continuum_gym.envs.occlusion.plant import make_mismatch_work, seen_tip, true_model
+from continuum_gym.envs.rows import by_plant
 from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.compiled import kernel
@@ -79,6 +83,8 @@ OcclusionStepParams = namedtuple("OcclusionStepParams", [
 #: metrics, reward terms, rewards and flags, and ``faults`` (1,): the count of rows flagged ``NON_FINITE``.
 OcclusionOutputs = namedtuple("OcclusionOutputs", ["base_cmd", "base_info", "obs", "metrics", "terms", "rewards",
                                                    "flags", "faults"])
+#: A thread's work: the step's scratch and the model-error plant's (None without a model error).
+OcclusionWork = namedtuple("OcclusionWork", ["step", "plant"])
 #: Per-thread scratch of ``occlusion_step_row``.
 OcclusionStepWork = namedtuple("OcclusionStepWork", ["ws", "scratch", "qdot", "residual", "projected", "cmd", "p_des",
                                                      "v_des", "A", "B", "ones", "points", "lens", "dr", "w", "w_rate",
@@ -92,13 +98,30 @@ def observation_dim(n_segments: int) -> int:
 
 @kernel
 def make_step_work(n_segments, n_points, n_insert):
-    """Per-thread scratch of ``occlusion_step_row`` and ``occlusion_observe``."""
+    """Per-thread scratch of ``step_row`` and ``observe``."""
     dof = 2 * n_segments + 1
     m = n_insert + n_segments * VOI_SAMPLES_PER_SEGMENT + 1
     return OcclusionStepWork(make_workspace(n_segments), make_scratch(n_points, dof), np.empty(dof), np.empty(dof),
                              np.empty(dof), np.empty(dof), np.empty(3), np.empty(3), np.empty((6, 6)),
                              np.empty((6, 2)), np.ones(dof), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 2)),
                              np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(dof + 1))
+
+
+@kernel
+def _nominal_work(model, params, plant):
+    robot, prm = model
+    return OcclusionWork(make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert), None)
+
+
+@kernel
+def _plant_work(model, params, plant):
+    robot, prm = model
+    return OcclusionWork(make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert),
+                         make_mismatch_work(robot, robot.lengths.shape[0] * 2 + 1))
+
+
+#: A thread's ``OcclusionWork`` (the plant's scratch only under a model error).
+make_work = by_plant(_nominal_work, _plant_work)
 
 
 @kernel(inline="always")
@@ -216,10 +239,28 @@ def occlusion_observation(o, i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_
     clip_observation(o, OBS_LIMIT)
 
 
-@kernel(borrows=True, no_cpython_wrapper=True)
-def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
-    """Geometry at the state of row i: next baseline command (cached), observation and metrics.
+# Borrowing: they hand back arrays of the bundles, which a caller that borrows (the rows) never releases.
+@kernel(borrows=True)
+def _nominal_truth(i, robot, prm, plant, mw):
+    return robot, prm.cone
 
+
+@kernel(borrows=True)
+def _plant_truth(i, robot, prm, plant, mw):
+    return true_model(i, robot, prm.cone, plant, mw)
+
+
+#: The robot and cone that move and are scored in row i: the nominal ones, or the plant's true ones.
+row_truth = by_plant(_nominal_truth, _plant_truth)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def observe(i, state, tasks, robot, prm, env, custom, work, out, plant, mw, true_robot, true_cone):
+    """Geometry at the state of row i: next baseline command (cached), metrics and observation.
+
+    The baseline reads the joints the sensors measure (the true ones without a model error); the metrics are
+    those of the true robot in the true cone; the observation holds what the system measures. Without a
+    model error (``plant`` None) the three coincide and the plant's lines are compiled out.
     The observation's layout is declared once, in ``outputs.OBSERVATION`` (and tabled in the env docstring).
     """
     q = state.q[i]
@@ -232,30 +273,58 @@ def occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out):
     # The step's scratch: the substeps that used it are done (no allocation per observation)
     p_des = work.p_des
     v_des = work.v_des
+    if plant is None:
+        qc = q
+    else:
+        measure(plant, i, state.steps[i] * env.substeps, q.shape[0] - 1)
+        qc = plant.q_meas[i]
     desired_point(tasks, i, t, p_des, v_des)
     R_des = desired_rotation(tasks, i, t, work.w, work.w_rate, work.turn, work.R_goal)
-    cache_base_command(i, q, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, True, out)
+    cache_base_command(i, qc, gamma, p_des, R_des, v_des, sub_dt, robot, prm, env, custom, work, plant is None, out)
     base_cmd = out.base_cmd
-    p = scratch.p
-    R = scratch.R
-    e_w = scratch.e_w  # the baseline's evaluation above is done with it
+    # the truth: the tip (computed with the base command above when the controller reads the true joints)
+    if plant is None:
+        p, R, e_w = scratch.p, scratch.R, scratch.e_w
+    else:
+        p, R, e_w = mw.p, mw.R, mw.e_true
+        tip_kernel(q, true_robot, work.ws, p, R, mw.J)
     orientation_error(R_des, R, scratch.work33, e_w)
     e_p0 = p_des[0] - p[0]
     e_p1 = p_des[1] - p[1]
     e_p2 = p_des[2] - p[2]
-    tip_error = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
-    ori_error = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
-    voi, _, _, _ = voi_of_configuration(q, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT, work.points,
-                                        work.lens, work.dr)
-    view_fraction = view_fraction_at(p, gamma, prm.cone)
+    voi, _, _, _ = voi_of_configuration(q, true_robot, work.ws, gamma, true_cone, VOI_SAMPLES_PER_SEGMENT,
+                                        work.points, work.lens, work.dr)
+    view_fraction = view_fraction_at(p, gamma, true_cone)
     metrics = out.metrics
     metrics[i, Metric.VOI] = voi
-    metrics[i, Metric.TIP_ERROR] = tip_error
-    metrics[i, Metric.ORIENTATION_ERROR] = ori_error
+    metrics[i, Metric.TIP_ERROR] = math.sqrt(e_p0 * e_p0 + e_p1 * e_p1 + e_p2 * e_p2)
+    metrics[i, Metric.ORIENTATION_ERROR] = math.sqrt(e_w[0] ** 2 + e_w[1] ** 2 + e_w[2] ** 2)
     metrics[i, Metric.VIEW_FRACTION] = view_fraction
-    occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t, tasks, env,
-                          base_cmd)
-    mark_non_finite(i, q, out, Flag.NON_FINITE)
+    metrics[i, Metric.TIP_IN_VIEW] = 1.0 if view_fraction <= env.visibility_fraction else 0.0
+    # what the system measures: the observation
+    if plant is None:
+        occlusion_observation(out.obs[i], i, n, q, gamma, e_p0, e_p1, e_p2, e_w, v_des, view_fraction, voi, t,
+                              tasks, env, base_cmd)
+    else:
+        seen_tip(i, gamma, prm.cone, true_cone, plant, mw)
+        ps = mw.p_seen
+        if plant.flags[i, MISMATCH_TIP_EXACT] == 0:
+            for a in range(3):
+                ps[a] += tip_noise(plant, i, state.steps[i] * env.substeps, a)
+        e_seen = scratch.e_w
+        orientation_error(R_des, mw.R_seen, scratch.work33, e_seen)
+        voi_estimate, _, _, _ = voi_of_configuration(qc, robot, work.ws, gamma, prm.cone, VOI_SAMPLES_PER_SEGMENT,
+                                                     work.points, work.lens, work.dr)
+        occlusion_observation(out.obs[i], i, n, qc, gamma, p_des[0] - ps[0], p_des[1] - ps[1], p_des[2] - ps[2],
+                              e_seen, v_des, view_fraction, voi_estimate, t, tasks, env, base_cmd)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True)
+def observe_row(i, state, tasks, model, params, custom, work, out, plant):
+    """Row i observed at its state (a reset): ``observe`` with its true robot and cone."""
+    robot, prm = model
+    true_robot, true_cone = row_truth(i, robot, prm, plant, work.plant)
+    observe(i, state, tasks, robot, prm, params, custom, work.step, out, plant, work.plant, true_robot, true_cone)
 
 
 @kernel(inline="always")
@@ -388,25 +457,33 @@ def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rat
     for k in range(N_TERMS_REWARD):
         total += terms[i, k]
     out.rewards[i] = total
-    mark_non_finite_reward(i, out, Flag.NON_FINITE)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
-def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work):
+def step_row(i, state, actions, tasks, model, params, custom, work, out, plant):
     """Advance row i by one control step; fills its obs, metrics, reward terms, reward and flags.
 
     ``out.base_cmd`` holds the baseline command at the current state on entry (cached from the last
-    observe) and at the new state on exit. The row's parts are shared with ``occlusion_mismatch`` and
-    inlined here.
+    observe) and at the new state on exit. Under a model error (``plant``) the controller, the null-space
+    projection and the guard compute with the nominal model at the measured joints, and the plant moves the
+    true robot: the command is delayed, the actuators lag, the bending angles follow through the backlash.
     """
-    ws, scratch, qdot, residual, projected, cmd = work.ws, work.scratch, work.qdot, work.residual, work.projected, \
-        work.cmd
+    robot, prm = model
+    env = params
+    sw, mw = work.step, work.plant
+    true_robot, true_cone = row_truth(i, robot, prm, plant, mw)
+    ws, scratch, qdot, residual, projected, cmd = sw.ws, sw.scratch, sw.qdot, sw.residual, sw.projected, sw.cmd
     tip_p, tip_R, tip_J = scratch.p, scratch.R, scratch.J
     rate_limit, lower, upper, rate_scale_vec = env.rate_limit, env.lower, env.upper, env.rate_scale_vec
     G = state.gamma
     dof = state.q.shape[1]
-    dt = env.control_dt / env.substeps
+    substeps = env.substeps
+    dt = env.control_dt / substeps
     q = state.q[i]
+    if plant is None:
+        qc = q
+    else:
+        qc = plant.q_meas[i]
     clamped = 0
     rate_saturated = 0
     gamma_saturated = 0
@@ -415,52 +492,68 @@ def occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, w
     base_saturated = out.base_info[i, BaseInfo.SATURATED]
     base_cmd = out.base_cmd
     action_sq, gamma_residual, project = residual_rates(i, actions, env, rate_scale_vec, dof, residual)
-    for s in range(env.substeps):
+    for s in range(substeps):
         t = state.steps[i] * env.control_dt + s * dt
+        if plant is not None:
+            if s > 0:  # the first substep's measurement is the observation's
+                measure(plant, i, state.steps[i] * substeps + s, dof - 1)
         gd, base_frozen, base_saturated = substep_base_rates(
-            i, s, t, dt, q, G[i], tasks, robot, prm, env, custom, work, base_cmd, project, base_frozen, base_saturated)
-        scale = joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, cmd)
+            i, s, t, dt, qc, G[i], tasks, robot, prm, env, custom, sw, base_cmd, project, base_frozen, base_saturated)
+        scale = joint_command(project, tip_J, residual, sw, qdot, projected, rate_limit, cmd)
         if scale < 1.0:
             rate_saturated = 1
-        for k in range(dof):
-            q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
-            if hit:
-                clamped |= 1 << k
-        g_rate, hit, clipped = endoscope_rate(q, G[i], gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R,
+        if plant is None:  # the joints move by the command; the guard checks the tip at them
+            for k in range(dof):
+                q[k], hit = clamp(q[k] + scale * cmd[k] * dt, lower[k], upper[k])
+                if hit:
+                    clamped |= 1 << k
+            qg = q
+        else:  # the guard predicts with the nominal model where the command takes the measured joints
+            u = mw.u
+            for k in range(dof):
+                u[k] = scale * cmd[k]
+            if guard_on(env, gamma_residual):
+                for k in range(dof):
+                    mw.q_pred[k], _ = clamp(qc[k] + u[k] * dt, lower[k], upper[k])
+            qg = mw.q_pred
+        g_rate, hit, clipped = endoscope_rate(qg, G[i], gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R,
                                               tip_J)
         if hit:
             guarded = 1
         if clipped:
             gamma_saturated = 1
-        G[i] = wrap_angle(G[i] + g_rate * dt)
+        if plant is None:
+            G[i] = wrap_angle(G[i] + g_rate * dt)
+        else:  # the plant: delay, actuator lag, position limits, backlash of the bending angles
+            clamped = plant_substep(i, q, G, g_rate, substeps, dt, lower, upper, plant, mw, clamped)
     state.steps[i] += 1
-    occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
+    observe(i, state, tasks, robot, prm, env, custom, sw, out, plant, mw, true_robot, true_cone)
     finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
                          base_frozen, base_saturated, guarded)
 
 
-@kernel(nogil=True)
-def occlusion_step_batch(state, actions, active, tasks, robot, prm, env, custom, out, claims, start,
-                         stop):
-    """Advance every row in [start, stop) whose ``active`` is nonzero by one control step; a row marked
-    ``OBSERVE_ONLY`` is observed at its state instead (a reset: next baseline command, observation, metrics).
+@kernel(inline="always")
+def plant_substep(i, q, G, g_rate, substeps, dt, lower, upper, me, mw, clamped):
+    """The true robot's substep under the command ``mw.u`` (joints) and ``g_rate`` (endoscope): the command waits
+    ``delay_steps``, the actuators follow it with their lag within the position limits, each bending angle
+    follows its actuator through the backlash. Returns the clamped joint bits."""
+    u = mw.u
+    dof = q.shape[0]
+    u[dof] = g_rate
+    delay_command(me, i, u, substeps)
+    lag_rates(me, i, u, dt)
+    qa = me.q_act[i]
+    rate = me.rate[i]
+    backlash = me.backlash[i]
+    for k in range(dof):
+        qa[k], hit = clamp(qa[k] + rate[k] * dt, lower[k], upper[k])
+        if hit:
+            clamped |= 1 << k
+    for k in range(dof):
+        q[k] = play(q[k], qa[k], backlash) if (k % 2 == 0 and k < dof - 1) else qa[k]
+    G[i] = wrap_angle(G[i] + rate[dof] * dt)
+    return clamped
 
-    One kernel for both, so a process loads the observation's compiled code once, inside the step's.
-    Releases the GIL, so ``BatchedCore`` steps rows on several threads, each claiming blocks of rows from
-    ``claims`` (``envs/row_claims``; ``SERIAL``: all rows on this thread); rows are independent and each is
-    computed by the same row function, so threaded results equal serial ones bit for bit.
-    """
-    work = make_step_work(robot.lengths.shape[0], prm.segments.shape[0], robot.n_insert)
-    first, last = first_rows(claims, start, stop)
-    while first < last:
-        for i in range(first, last):
-            mode = active[i]
-            if mode == OBSERVE_ONLY:
-                occlusion_observe(i, state, tasks, robot, prm, env, custom, work, out)
-            elif mode != 0:
-                occlusion_step_row(i, state, actions, tasks, robot, prm, env, custom, out, work)
-        first, last = next_rows(claims, start, stop, first, last)
 
-
-__all__ = ["occlusion_step_batch", "REWARD_TERMS", "Metric", "Flag", "BaseInfo", "OBSERVATION",
-           "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs"]
+__all__ = ["make_work", "observe_row", "step_row", "REWARD_TERMS", "Metric", "Flag", "BaseInfo", "OBSERVATION",
+           "observation_dim", "OcclusionState", "OcclusionStepParams", "OcclusionOutputs", "OcclusionWork"]

@@ -1,14 +1,15 @@
 """What an OcclusionAvoidance step writes, declared once: the observation's layout and the columns of
 ``metrics``, ``flags`` and ``base_info`` (see ``continuum_gym.envs.columns``).
 
-The step kernels index these arrays only through these declarations, the env docstring's observation
-table is made from ``OBSERVATION``, and the extension tutorial's column table is checked against
-``Metric`` and ``Flag``.
+The row functions index these arrays only through these declarations; a column declared as a ``Value``
+reaches ``info``, the env docstring and the evaluation's tables from here (the library reads it), the
+observation's table is made from ``OBSERVATION``, and the extension tutorial's column table is checked
+against ``Metric`` and ``Flag``.
 """
 
 from __future__ import annotations
 
-from continuum_gym.envs.columns import Block, Columns, Layout
+from continuum_gym.envs.columns import NON_FINITE, Block, Columns, Layout, Value, mean
 
 # Observation scales.
 POSITION_ERROR_SCALE = 0.01  # m
@@ -39,24 +40,33 @@ OBS = OBSERVATION.offsets()
 class Metric(Columns):
     """Columns of ``metrics`` (float64), at the state after the step."""
 
-    VOI = "Visual Occlusion Index (eq 27)"
-    TIP_ERROR = "tip position error (m)"
-    ORIENTATION_ERROR = "tip orientation error (rad)"
-    VIEW_FRACTION = "tip angle from the view axis / cone half-angle"
+    VOI = Value("Visual Occlusion Index (eq 27) at the new state", info="voi",
+                episode=(mean("mean_voi", "mean visual occlusion index (VOI)"),))
+    TIP_ERROR = Value("tip position error (m)", info="tip_error_m", unit="m",
+                      episode=(mean("mean_tip_error_m", "mean tip position error", unit="m", display_unit="mm",
+                                    display_scale=1e3),))
+    ORIENTATION_ERROR = Value("tip orientation error (rad)", info="orientation_error_rad", unit="rad",
+                              episode=(mean("mean_orientation_error_rad", "mean tip orientation error", unit="rad"),))
+    VIEW_FRACTION = Value("tip angle from the view axis / cone half-angle", info="tip_view_fraction")
+    TIP_IN_VIEW = Value("tip within 0.7 of the half-angle (1 or 0)", info="tip_in_view", kind="bool",
+                        episode=(mean("tip_in_view_fraction", "tip in view (within 0.7 of the half-angle)",
+                                      higher_is_better=True),))
 
 
 class Flag(Columns):
     """Columns of ``flags`` (int64; joint flags are bit masks, bit k for joint k)."""
 
-    CLAMPED = "joint bits clamped at a position limit"
-    RATE_SATURATED = "joint rates scaled down to the rate limits"
-    GAMMA_SATURATED = "endoscope rate clipped to its limit"
+    CLAMPED = Value("joints clamped at a position limit (dof,)", info="clamped_joints", kind="bits")
+    RATE_SATURATED = Value("joint rates scaled down to the rate limits", info="rate_saturated", kind="bool")
+    GAMMA_SATURATED = Value("endoscope rate clipped to its limit", info="gamma_rate_saturated", kind="bool")
     TERMINATED = "the tip is lost (more than 10 mm from its desired position)"
     TRUNCATED = "the task's duration is over"
-    BASE_FROZEN = "joint bits the baseline froze at a limit (OR over the substeps)"
-    BASE_SATURATED = "the baseline's rates were scaled down"
-    GUARDED = "the visibility guard cut the residual's endoscope rotation"
-    NON_FINITE = "a value of the row is not finite (NaN or inf): the episode cannot be scored"
+    BASE_FROZEN = Value("joints the baseline froze at a limit during the step (dof,)", info="base_frozen_joints",
+                        kind="bits")
+    BASE_SATURATED = Value("the baseline's rates were scaled down", info="base_rate_saturated", kind="bool")
+    GUARDED = Value("the visibility guard cut the residual's endoscope rotation", info="visibility_guarded",
+                    kind="bool", episode=(mean("visibility_guarded_fraction"),))
+    NON_FINITE = NON_FINITE
 
 
 class BaseInfo(Columns):

@@ -32,12 +32,14 @@ class ViewTrackingConfig(EnvConfig):
 
     env_id: ClassVar[str] = "ContinuumGym/ViewTracking-v0"
     baselines: ClassVar[tuple] = ("resolved_rate", "dimension_reduced")
-    packaged_controllers: ClassVar[tuple] = ("continuum_gym.agents.distilled_view:distilled_optimum",)
+    packaged_controllers: ClassVar[tuple] = ("continuum_gym.envs.view_tracking.distilled:distilled_optimum",)
     default_weights: ClassVar[dict] = {"overlap": 1.0, "position": 0.1, "orientation": 0.1, "action": 0.01,
                                        "overlap_bonus": 0.0}
     residual_spaces: ClassVar[tuple] = ("joint", "target")
     object_keywords: ClassVar[tuple] = ("robot", "davinci", "model_error")
     task_module: ClassVar[str] = "continuum_gym.envs.view_tracking.tasks"
+    #: the robots this env takes (``registry.register_robot`` checks a plug-in against it)
+    robot_class: ClassVar[str] = "continuum_gym.robots.endoscope:ContinuumEndoscope"
     trajectory_class: ClassVar[str] = "continuum_gym.envs.trajectories:DaVinciTrajectory"
     builtin_tasks: ClassVar[tuple] = TASKS
     test_only_tasks: ClassVar[tuple] = TEST_ONLY

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -11,9 +11,6 @@ from continuum_gym.envs.goal import ContinuumGoalEnv, pose_goal, split_goal
 from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
 from continuum_gym.validation import fraction
 
-if TYPE_CHECKING:
-    from continuum_gym.envs.view_tracking.core import ViewTrackingCore
-
 ENV_ID = ViewTrackingConfig.env_id
 
 
@@ -21,10 +18,6 @@ class ViewTrackingGoalEnv(ContinuumGoalEnv):
     __doc__ = goal.__doc__
     base_id = ENV_ID
     goal_keywords = ("reward_type", "or_threshold")
-
-    if TYPE_CHECKING:  # the base env's core is this env's
-        @property
-        def core(self) -> ViewTrackingCore: ...
 
     def __init__(self, reward_type: str = "dense", or_threshold: float = 0.8, **kwargs: Any) -> None:
         self.or_threshold = fraction(or_threshold, "or_threshold")

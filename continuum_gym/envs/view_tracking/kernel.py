@@ -1,14 +1,18 @@
-"""One compiled call per environment step of ViewTracking, for the whole batch.
+"""ViewTracking's rows: what one endoscope does in a control step, and what is observed of it.
 
-Per control step and robot: the da Vinci target at the current time, the baseline's joint rates
+The library runs these row functions for the whole batch in one compiled call (``envs/rows.py``). Per
+control step and robot: the da Vinci target at the current time, the baseline's joint rates
 (cached from the previous observation), plus the residual, optional rate limits, explicit Euler
 clamped to the paper's joint limits (deltas wrapped), then the overlap ratio, pose errors, the next
 baseline command, the observation and the reward terms at the new state.
 
-Kernels take named bundles: ``ViewState`` (q, step counters), ``TaskArrays`` (the da Vinci trajectory
-of each row), the robot's, the controller's, the da Vinci's and the frustum's ``kernel_args``, the
-env's ``ViewStepParams`` and the ``ViewOutputs`` they fill. The observation's layout and the columns of
-``metrics`` and ``flags`` are declared once, in ``outputs`` (``OBS``, ``Metric``, ``Flag``).
+The row functions take the library's bundles (``envs/core.py``): ``ViewState`` (q, step counters),
+``TaskArrays`` (the da Vinci trajectory of each row), ``model`` = (the robot's, the controller's, the da Vinci's
+and the frustum's ``kernel_args``), the env's ``ViewStepParams``, the registered controller's slot (or None),
+the thread's work, the ``ViewOutputs`` they fill and ``plant``: the model-error arrays, or None. Under a model
+error the same step, observation and metric code runs with the plant's pieces (``view_tracking.plant``). The
+observation's layout and the columns of ``metrics`` and ``flags`` are declared once, in ``outputs`` (``OBS``,
+``Metric``, ``Flag``).
 """
 
 from __future__ import annotations
@@ -24,21 +28,24 @@ from continuum_gym.baselines.view_tracking import (
     view_errors,
     view_rates_kernel,
 )
-from continuum_gym.envs.common_kernels import (
-    OBSERVE_ONLY,
-    clip_observation,
-    desired_point,
-    mark_non_finite,
-    mark_non_finite_reward,
-)
-from continuum_gym.envs.row_claims import first_rows, next_rows
+from continuum_gym.envs.common_kernels import clip_observation, desired_point
+from continuum_gym.envs.mismatch_kernels import measure, tip_noise
+from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT, MISMATCH_TIP_EXACT
+from continuum_gym.envs.rows import by_plant
 from continuum_gym.envs.view_tracking.controller import view_slot_rates
-from continuum_gym.envs.view_tracking.outputs import OBS, OBS_DIM, POSITION_ERROR_SCALE, Flag, Metric
+from continuum_gym.envs.view_tracking.outputs import OBS, OBS_DIM, OVERLAP_THRESHOLD, POSITION_ERROR_SCALE, Flag, Metric
+from continuum_gym.envs.view_tracking.plant import (
+    make_view_mismatch_work,
+    plant_step,
+    true_camera,
+    true_model,
+)
 from continuum_gym.geometry.overlap import make_overlap_work
 from continuum_gym.geometry.overlap_clipping import overlap_ratio_inline
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.davinci import davinci_pose
-from continuum_gym.robots.rotations import rotation_exp
+from continuum_gym.robots.endoscope_kernels import endoscope_kinematics
+from continuum_gym.robots.rotations import orientation_error, rotation_exp
 
 ACTION_DIM = 6
 OBS_LIMIT = 10.0
@@ -47,7 +54,7 @@ OBS_LIMIT = 10.0
 TARGET_SHIFT_SCALE = np.array([0.02, 0.5])
 REWARD_TERMS = ("overlap", "position", "orientation", "action", "overlap_bonus")
 #: The coverage map's success criterion (paper-notes §2.6): OR above it counts as reproducing the view.
-OVERLAP_BONUS_THRESHOLD = 0.8
+OVERLAP_BONUS_THRESHOLD = OVERLAP_THRESHOLD
 N_REWARD_TERMS = len(REWARD_TERMS)
 
 
@@ -59,7 +66,9 @@ ViewStepParams = namedtuple("ViewStepParams", ["control_dt", "has_base", "residu
                                                "target_scale", "action_scale", "rate_limit", "weights"])
 #: What a step writes: the cached baseline command, observations, metrics, reward terms, rewards, flags.
 ViewOutputs = namedtuple("ViewOutputs", ["base_cmd", "obs", "metrics", "terms", "rewards", "flags", "faults"])
-#: Per-thread scratch of a ViewTracking row's step (``view_step_rows``).
+#: A thread's work: the step's scratch and the model-error plant's (None without a model error).
+ViewWork = namedtuple("ViewWork", ["step", "plant"])
+#: Per-thread scratch of a ViewTracking row's step (``step_row``).
 ViewStepWork = namedtuple("ViewStepWork", ["scratch", "cmd", "q_new", "q_dv", "dv_rate", "p_dv", "R_dv", "p_tgt",
                                            "w", "turn", "R_goal", "base_rates", "overlap"])
 
@@ -124,27 +133,83 @@ def target_and_base_command(i, qc, t, tasks, robot, prm, dv, env, custom, work, 
 
 
 @kernel(borrows=True, no_cpython_wrapper=True, inline="always")
-def view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out):
-    """State of row i -> next baseline command (cached), observation, metrics [OR, eps_p (m), eps_R (rad)].
+def observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out, plant, mw, true_robot):
+    """State of row i -> next baseline command (cached), metrics [OR, eps_p (m), eps_R (rad), OR > 0.8] and
+    observation.
 
-    ``work`` is a ``ViewStepWork``: the step that calls this is done with its arrays (no allocation per row).
+    The IK reads the joints the sensors measure (the true ones without a model error); the metrics are those of
+    the true endoscope (its camera on its true mounting); the observation holds what the system measures. Without
+    a model error (``plant`` None) the three coincide and the plant's lines are compiled out. ``work`` is the
+    step's ``ViewStepWork``: the step that calls this is done with its arrays (no allocation per row).
     """
     q = state.q[i]
     control_dt = env.control_dt
     t = state.steps[i] * control_dt
     scratch, q_dv, p_dv, R_dv, p_tgt = work.scratch, work.q_dv, work.p_dv, work.R_dv, work.p_tgt
     base_cmd = out.base_cmd
-    eps_p, eps_r = target_and_base_command(i, q, t, tasks, robot, prm, dv, env, custom, work, True, base_cmd)
-    p_ct = scratch.p_ct
-    e_w = scratch.e_w
-    ratio = overlap_ratio_inline(p_dv, R_dv, scratch.p_cam, scratch.R_ct, frustum.tan_half, frustum.near,
-                                 frustum.far, work.overlap)
+    exact_mount = True
+    if plant is None:
+        qc = q
+    else:
+        measure(plant, i, state.steps[i], 0)
+        qc = plant.q_meas[i]
+    eps_p, eps_r = target_and_base_command(i, qc, t, tasks, robot, prm, dv, env, custom, work, plant is None,
+                                           base_cmd)
+    # the truth: the camera of the true endoscope (computed with the base command above when the IK reads it)
+    if plant is None:
+        p_cam, R_cam = scratch.p_cam, scratch.R_ct
+    else:
+        endoscope_kinematics(q, true_robot, scratch.ws, mw.p_cam, mw.R_body, mw.p_ct, mw.J, False)
+        exact_mount = plant.flags[i, MISMATCH_CALIB_EXACT] != 0
+        true_camera(i, plant, mw, exact_mount)
+        p_cam, R_cam = mw.p_cam, mw.R_cam
+    ratio = overlap_ratio_inline(p_dv, R_dv, p_cam, R_cam, frustum.tan_half, frustum.near, frustum.far, work.overlap)
+    if plant is not None:
+        d0 = p_tgt[0] - mw.p_tgt[0]
+        d1 = p_tgt[1] - mw.p_tgt[1]
+        d2 = p_tgt[2] - mw.p_tgt[2]
+        e_true = mw.e_true
+        orientation_error(R_dv, R_cam, scratch.work33, e_true)
+        eps_p = math.sqrt(d0 ** 2 + d1 ** 2 + d2 ** 2)
+        eps_r = math.sqrt(e_true[0] ** 2 + e_true[1] ** 2 + e_true[2] ** 2)
     metrics = out.metrics
     metrics[i, Metric.OR] = ratio
     metrics[i, Metric.POSITION_ERROR] = eps_p
     metrics[i, Metric.ORIENTATION_ERROR] = eps_r
-    view_observation(out.obs[i], i, t, q, p_tgt, p_ct, e_w, ratio, q_dv, tasks, prm, dv, env, base_cmd)
-    mark_non_finite(i, q, out, Flag.NON_FINITE)
+    metrics[i, Metric.OR_ABOVE] = 1.0 if ratio > OVERLAP_BONUS_THRESHOLD else 0.0
+    # what the system measures: the observation
+    if plant is None:
+        view_observation(out.obs[i], i, t, q, p_tgt, scratch.p_ct, scratch.e_w, ratio, q_dv, tasks, prm, dv, env,
+                         base_cmd)
+    else:  # the tracked tip (body pose, nominal mounting) and its overlap ratio
+        p_seen = mw.p_seen
+        for a in range(3):
+            p_seen[a] = mw.p_ct[a]
+        if plant.flags[i, MISMATCH_TIP_EXACT] == 0:
+            for a in range(3):
+                p_seen[a] += tip_noise(plant, i, state.steps[i], a)
+        e_w = scratch.e_w
+        orientation_error(R_dv, mw.R_body, scratch.work33, e_w)
+        ratio_seen = ratio if exact_mount else overlap_ratio_inline(p_dv, R_dv, mw.p_cam, mw.R_body,
+                                                                    frustum.tan_half, frustum.near, frustum.far,
+                                                                    work.overlap)
+        view_observation(out.obs[i], i, t, qc, p_tgt, p_seen, e_w, ratio_seen, q_dv, tasks, prm, dv, env, base_cmd)
+
+
+@kernel(inline="always")
+def row_truth(i, robot, plant):
+    """The endoscope that moves and is scored in row i: the nominal one, or the plant's true one."""
+    if plant is None:
+        return robot
+    return true_model(i, robot, plant)
+
+
+@kernel(borrows=True, no_cpython_wrapper=True, inline="always")
+def observe_row(i, state, tasks, model, params, custom, work, out, plant):
+    """Row i observed at its state (a reset): ``observe`` with its true endoscope."""
+    robot, prm, dv, frustum = model
+    observe(i, state, tasks, robot, prm, dv, frustum, params, custom, work.step, out, plant, work.plant,
+            row_truth(i, robot, plant))
 
 
 @kernel
@@ -152,6 +217,20 @@ def make_view_step_work():
     return ViewStepWork(make_view_scratch(), np.empty(6), np.empty(6), np.empty(4), np.empty(4), np.empty(3),
                         np.empty((3, 3)), np.empty(3), np.empty(3), np.empty((3, 3)), np.empty((3, 3)), np.empty(6),
                         make_overlap_work())
+
+
+@kernel
+def _nominal_work(model, params, plant):
+    return ViewWork(make_view_step_work(), None)
+
+
+@kernel
+def _plant_work(model, params, plant):
+    return ViewWork(make_view_step_work(), make_view_mismatch_work())
+
+
+#: A thread's ``ViewWork`` (the plant's scratch only under a model error).
+make_work = by_plant(_nominal_work, _plant_work)
 
 
 @kernel(borrows=True, no_cpython_wrapper=True)
@@ -207,27 +286,37 @@ def view_command(i, qc, state, actions, tasks, robot, prm, dv, env, custom, base
     return action_sq, scale
 
 
-# The row's parts and its observation are inlined into view_step_rows, their only caller (the command and
-# the observation's layout into the model-mismatch rows too): a call passes every array of the bundles as
-# flattened arguments, a sizeable cost against a row of ~3 us. The observation is inlined at one place, for
-# resets and steps alike, and DR IK stays a call: inlined as well it makes the step no faster and the first
-# compile much longer.
-@kernel(inline="always")
-def advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out, work):
-    """Row i's control step up to its observation: one IK step of dt = control_dt (the paper's 0.01 s).
-
-    Returns (|a|^2, clamped joint bits, rate scale) for ``finish_view_row``.
-    """
-    cmd, q_new = work.cmd, work.q_new
+# The row's parts and its observation are inlined into the library's loop over rows (``envs/rows.py``): a call
+# passes every array of the bundles as flattened arguments, a sizeable cost against a row of ~3 us. The
+# observation is inlined at one place, for resets and steps alike, and DR IK stays a call: inlined as well it
+# makes the step no faster and the first compile much longer.
+@kernel(borrows=True, no_cpython_wrapper=True, inline="always")
+def step_row(i, state, actions, tasks, model, params, custom, work, out, plant):
+    """Row i's control step: one IK step of dt = control_dt (the paper's 0.01 s), then its observation, reward
+    terms and flags. Under a model error (``plant``) the IK reads the measured joints and the plant moves the true
+    endoscope (``view_tracking.plant.plant_step``)."""
+    robot, prm, dv, frustum = model
+    env = params
+    sw = work.step
+    cmd, q_new = sw.cmd, sw.q_new
     q = state.q[i]
+    if plant is None:
+        qc = q
+    else:
+        qc = plant.q_meas[i]
     base_cmd = out.base_cmd
     control_dt = env.control_dt
-    action_sq, scale = view_command(i, q, state, actions, tasks, robot, prm, dv, env, custom, base_cmd, work, cmd)
-    clamped = integrate_view_step(q, cmd, control_dt, prm.lower, prm.upper, q_new)
-    for k in range(6):
-        q[k] = q_new[k]
+    action_sq, scale = view_command(i, qc, state, actions, tasks, robot, prm, dv, env, custom, base_cmd, sw, cmd)
+    if plant is None:
+        clamped = integrate_view_step(q, cmd, control_dt, prm.lower, prm.upper, q_new)
+        for k in range(6):
+            q[k] = q_new[k]
+    else:
+        clamped = plant_step(i, q, cmd, control_dt, prm.lower, prm.upper, plant, work.plant, q_new)
     state.steps[i] += 1
-    return action_sq, clamped, scale
+    observe(i, state, tasks, robot, prm, dv, frustum, env, custom, sw, out, plant, work.plant,
+            row_truth(i, robot, plant))
+    finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
 
 
 @kernel(inline="always")
@@ -250,37 +339,7 @@ def finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scal
     for k in range(N_REWARD_TERMS):
         total += terms[i, k]
     out.rewards[i] = total
-    mark_non_finite_reward(i, out, Flag.NON_FINITE)
 
 
-@kernel(nogil=True)
-def view_step_batch(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, claims,
-                    start, stop):
-    """Advance every row in [start, stop) whose ``active`` is nonzero by one control step, or observe a row
-    marked ``OBSERVE_ONLY`` (releases the GIL; rows claimed from ``claims``: see occlusion.kernel)."""
-    work = make_view_step_work()
-    first, last = first_rows(claims, start, stop)
-    while first < last:
-        view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, work,
-                       first, last)
-        first, last = next_rows(claims, start, stop, first, last)
-
-
-@kernel(borrows=True, no_cpython_wrapper=True)
-def view_step_rows(state, actions, active, tasks, robot, prm, dv, frustum, env, custom, out, work, start,
-                   stop):
-    """``view_step_batch``'s loop on a given work: apart from its allocation, so that the rows run without
-    reference counts (``kernel(borrows=True)``)."""
-    for i in range(start, stop):
-        mode = active[i]
-        if mode == 0:
-            continue
-        step = mode != OBSERVE_ONLY
-        action_sq, clamped, scale = 0.0, 0, 1.0
-        if step:
-            action_sq, clamped, scale = advance_view_row(i, state, actions, tasks, robot, prm, dv, env, custom, out,
-                                                         work)
-        view_observe(i, state, tasks, robot, prm, dv, frustum, env, custom, work, out)
-        if step:
-            finish_view_row(i, state, actions, tasks, env, out, action_sq, clamped, scale)
-
+__all__ = ["make_work", "observe_row", "step_row", "REWARD_TERMS", "ViewState", "ViewStepParams", "ViewOutputs",
+           "ViewWork", "ACTION_DIM", "OBS_LIMIT", "TARGET_SHIFT_SCALE"]

@@ -8,7 +8,7 @@ table is made from ``OBSERVATION``, and the extension tutorial's column table is
 
 from __future__ import annotations
 
-from continuum_gym.envs.columns import Block, Columns, Layout
+from continuum_gym.envs.columns import NON_FINITE, Block, Columns, Episode, Layout, Value, mean
 
 POSITION_ERROR_SCALE = 0.05  # m, of the target point's offset from the tip
 
@@ -37,22 +37,34 @@ OBS_DIM = OBSERVATION.width(upto="target_insertion")
 TARGET_OBS_DIM = OBSERVATION.width() - OBS_DIM
 
 
+#: The coverage map's success criterion (paper-notes §2.6): OR above it counts as reproducing the view.
+OVERLAP_THRESHOLD = 0.8
+
+
 class Metric(Columns):
     """Columns of ``metrics`` (float64), at the state after the step."""
 
-    OR = "overlap ratio of the two views"
-    POSITION_ERROR = "target-point error eps_p (m)"
-    ORIENTATION_ERROR = "orientation error eps_R (rad)"
+    OR = Value("exact overlap ratio of the two view frustums at the new state", info="overlap_ratio", episode=(
+        mean("mean_or", "mean overlap ratio (OR)", higher_is_better=True),
+        Episode("final_or", "final"),
+        Episode("coverage_percent", "final", "coverage (final OR > 0.8 on the grid)", True, "%",
+                grid_threshold=OVERLAP_THRESHOLD)))
+    POSITION_ERROR = Value("distance of the target point from the da Vinci's (m)", info="position_error_m", unit="m",
+                           episode=(mean("mean_position_error_m", "mean target-point error", unit="m",
+                                         display_unit="mm", display_scale=1e3),))
+    ORIENTATION_ERROR = Value("orientation error of the camera frame (rad)", info="orientation_error_rad", unit="rad")
+    OR_ABOVE = Value("the overlap ratio is above 0.8 (1 or 0)", info="overlap_above_0.8", kind="bool",
+                     episode=(mean("or_above_0.8_fraction", "steps with OR > 0.8", higher_is_better=True),))
 
 
 class Flag(Columns):
     """Columns of ``flags`` (int64; ``CLAMPED`` is a bit mask, bit k for joint k)."""
 
-    CLAMPED = "joint bits clamped at a limit"
-    RATE_SATURATED = "rates scaled down to the rate limits"
+    CLAMPED = Value("joints clamped at a limit (6,)", info="clamped_joints", kind="bits")
+    RATE_SATURATED = Value("joint rates scaled down to ``rate_limits``", info="rate_saturated", kind="bool")
     TERMINATED = "the pose error is not finite (always with NON_FINITE: the env raises, or ends it as truncated)"
     TRUNCATED = "the task's duration is over"
-    NON_FINITE = "a value of the row is not finite (NaN or inf): the episode cannot be scored"
+    NON_FINITE = NON_FINITE
 
 
-__all__ = ["OBSERVATION", "OBS", "OBS_DIM", "TARGET_OBS_DIM", "Metric", "Flag", "POSITION_ERROR_SCALE"]
+__all__ = ["OBSERVATION", "OBS", "OBS_DIM", "TARGET_OBS_DIM", "Metric", "Flag", "POSITION_ERROR_SCALE", "OVERLAP_THRESHOLD"]

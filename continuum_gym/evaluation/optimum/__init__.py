@@ -60,6 +60,7 @@ _EXPORTS = {
     "VISIBILITY": "protocol",
     "SelfMotion": "continuum_gym.baselines.self_motion", "trace_self_motion": "continuum_gym.baselines.self_motion",
     "INSERTION_SCALE": "continuum_gym.baselines.self_motion", "TRACE_STEP": "continuum_gym.baselines.self_motion",
+    "OPTIMA": "optima", "register_optimum": "optima", "optimum_of": "optima",
     "bounded_least_squares": "view", "coverage_optimum": "view", "overlap_of_configuration": "view",
     "view_tracking_optimum": "view",
 }

@@ -8,8 +8,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.spec import ENV_SPECS
 from continuum_gym.evaluation.optimum.cache import CACHE_PATH, load_optimum_cache
+from continuum_gym.evaluation.optimum.optima import optimum_of
 from continuum_gym.evaluation.optimum.protocol import (
     COVERAGE_GRID,
     ENV_HOLD_TASKS,
@@ -20,7 +22,7 @@ from continuum_gym.evaluation.optimum.protocol import (
 from continuum_gym.validation import integer
 
 #: Tasks of each environment id (from its spec); ``all`` means every id.
-ENV_TASKS = {env_id: spec.optimum_tasks for env_id, spec in ENV_SPECS.items() if spec.optimum_tasks}
+ENV_TASKS = {env_id: benchmark_of(spec).optimum_tasks for env_id, spec in ENV_SPECS.items() if benchmark_of(spec).optimum_tasks}
 TASKS = tuple(task for tasks in ENV_TASKS.values() for task in tasks)
 #: The ids of the two papers' environments, found by the optimum tasks this command computes for them.
 VIEW_TRACKING_ID = next(env_id for env_id, tasks in ENV_TASKS.items() if "coverage" in tasks)
@@ -148,9 +150,9 @@ def run_variant(args: argparse.Namespace) -> int:
         workers = integer(args.workers, "--workers", low=1)
         grid = integer(args.grid, "--grid (points per axis)", low=2)
         episodes = integer(args.env_hold_tasks, "--env-hold-tasks", low=1)
-        if args.task not in ("all", *spec.optimum_tasks):
+        if args.task not in ("all", *benchmark_of(spec).optimum_tasks):
             raise ValueError(f"task {args.task!r} does not belong to {args.env!r}; its tasks: "
-                             f"{', '.join(spec.optimum_tasks)} or all")
+                             f"{', '.join(benchmark_of(spec).optimum_tasks)} or all")
         if args.write_cache:
             raise ValueError("--write-cache updates the shipped cache of the paper's environments; a variant's "
                              "optimum is kept in the user cache ($CONTINUUM_GYM_CACHE) by itself")
@@ -159,9 +161,10 @@ def run_variant(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"continuum-gym optimum: error: {error}", file=sys.stderr)
         return 2
-    if not spec.physics or not spec.optimum:
+    if not benchmark_of(spec).physics or optimum_of(spec.env_id) is None:
         print(f"continuum-gym optimum: {args.env} has no known offline optimum: its environment "
-              f"({spec.short_name}) names no optimum to compute (EnvSpec.optimum and .physics are empty); nothing "
+              f"({spec.short_name}) registers none (evaluation.optimum.register_optimum) or its Benchmark names no "
+              f"physics it depends on; nothing "
               "computed, nothing written", file=sys.stderr)
         return 1
     started = time.perf_counter()
@@ -201,7 +204,7 @@ def variant_figures(env_id: str, spec: Any, results: dict, out: Path) -> list[Pa
     """The figures of a variant's optimum (those of its env's table rows), named after its id; the paths written."""
     from continuum_gym.evaluation.optimum.figures import draw_coverage_maps, draw_hold_test
 
-    keys = {row.cache_key for row in spec.references} & set(results)
+    keys = {row.cache_key for row in benchmark_of(spec).references} & set(results)
     short = env_id.split("/")[-1].rsplit("-v", 1)[0]
     written = []
     if keys:

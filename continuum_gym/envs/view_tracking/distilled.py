@@ -22,7 +22,7 @@ step) that maximises the OR after one control step, where it beats no step. This
 ``overlap_polish`` (``envs/view_tracking/polish.py``) moved into the controller, so that the base alone holds
 the best configuration near the network's; ``ascent=0`` turns it off. It is registered through the public
 registry (``register_controller``), as a researcher's controller is; a config names it
-``"continuum_gym.agents.distilled_view:distilled_optimum"`` so that any process rebuilds it by importing this
+``"continuum_gym.envs.view_tracking.distilled:distilled_optimum"`` so that any process rebuilds it by importing this
 module, and ``continuum-gym evaluate`` gives it a row beside the analytic baselines (``packaged_controllers`` of the config).
 It knows the paper's robot and da Vinci endoscope only (the network was fitted for them): with other physics the
 evaluation leaves its row out.
@@ -94,7 +94,7 @@ def decode(y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
 
 def pack(weights: dict, gain: float = GAIN, cap: float = CAP, ascent: float = ASCENT) -> np.ndarray:
     """The controller's ``params``: the header (see ``HEADER``), then W0, b0, W1, b1, W2, b2 row-major."""
-    from continuum_gym.envs.view_tracking.core import ACTION_SCALE
+    from continuum_gym.envs.view_tracking.env import ACTION_SCALE
     from continuum_gym.geometry.frustum import Frustum
     from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
@@ -213,15 +213,16 @@ def distilled_rates(q, p_target, R_target, dt, robot, params, out):
 def register(weights: Path | None = None, gain: float = GAIN, cap: float = CAP, ascent: float = ASCENT,
              name: str = NAME) -> CustomController:
     """Register the controller (``replace=True``: importing twice is harmless); returns the registration."""
+    from continuum_gym.envs.registered import add_controller
     from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
-    from continuum_gym.registry import register_controller
 
     path = Path(weights) if weights is not None else WEIGHTS
     with np.load(path) as data:
         params = pack(dict(data), gain, cap, ascent)
-    return register_controller(name, distilled_rates, env=ViewTrackingConfig.env_id, params=params.tolist(),
-                               replace=True, doc=f"steers to the configuration distilled from the offline optimum "
-                               f"({path.name}; gain {gain:g} 1/s, cap {cap:g} and OR lookahead {ascent:g} action units)")
+    return add_controller(name, ViewTrackingConfig.env_id, distilled_rates, np.ascontiguousarray(params, np.float64),
+                          f"steers to the configuration distilled from the offline optimum ({path.name}; gain "
+                          f"{gain:g} 1/s, cap {cap:g} and OR lookahead {ascent:g} action units)",
+                          "continuum_gym.envs.view_tracking.controller", __name__)
 
 
 def configurations(p_target: np.ndarray, R_target: np.ndarray, weights: Path | None = None) -> np.ndarray:

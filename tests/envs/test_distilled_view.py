@@ -1,4 +1,4 @@
-"""ViewTracking's ``distilled_optimum`` base (``continuum_gym.agents.distilled_view``), against independent
+"""ViewTracking's ``distilled_optimum`` base (``continuum_gym.envs.view_tracking.distilled``), against independent
 computation: the network in numpy from the shipped weights, the controller's fixed point, and the coverage the
 dimension-reduced IK reaches on the same validation targets."""
 
@@ -11,7 +11,7 @@ import os
 import numpy as np
 import pytest
 
-from continuum_gym.envs.view_tracking.core import ACTION_SCALE
+from continuum_gym.envs.view_tracking.env import ACTION_SCALE
 from continuum_gym.robots import ContinuumEndoscope, DaVinciEndoscope
 
 VIEW = "ContinuumGym/ViewTracking-v0"
@@ -26,7 +26,7 @@ def registrations_stay_in_this_module():
 
     before = os.environ.get(ENV_VAR)
     global distilled_view
-    distilled_view = importlib.import_module("continuum_gym.agents.distilled_view")
+    distilled_view = importlib.import_module("continuum_gym.envs.view_tracking.distilled")
     yield
     if before is None:
         os.environ.pop(ENV_VAR, None)
