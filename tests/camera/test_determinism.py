@@ -46,10 +46,14 @@ def test_rows_rendered_on_two_threads_at_once_are_the_same(scenes, monkeypatch):
     scene, view = scenes["occlusion"]
     one = Renderer(threads=1).render(scene, view, randomisation=RANDOM, rng=np.random.default_rng(5))
     used = []
+    # Both threads wait here until the other has started: they are alive at the same time, so their idents
+    # differ (an ident is reused once its thread has exited) and the kernel really runs twice at once.
+    both = threading.Barrier(2, timeout=60)
 
     def halves(entry, args, num_rows, threads, block):
         def run(start, stop):
             used.append(threading.get_ident())
+            both.wait()
             entry(start, stop, *args)
 
         workers = [threading.Thread(target=run, args=(0, num_rows // 2)),
