@@ -96,8 +96,8 @@ def copy_figures(out: Path) -> list:
 def redraw_learning_curves() -> list:
     """The learning-curve figures need only the runs' files: redrawn on every regeneration."""
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import discover_policies
     from continuum_gym.evaluation.figures import draw_learning_curves
+    from continuum_gym.evaluation.methods import discover_policies
 
     policies = discover_policies(RUNS)
     written = []

@@ -300,7 +300,8 @@ def test_the_cli_imports_plugins_before_it_reads_any_argument(my_lab, tmp_path):
 def test_evaluate_gives_a_registered_controller_its_row_and_measures_headroom_against_it(my_lab, tmp_path):
     """A residual trained on the user's controller: its baseline row, its row, headroom against that base."""
     from continuum_gym.agents.train import train
-    from continuum_gym.evaluation.evaluate import discover_policies, evaluate_methods
+    from continuum_gym.evaluation.evaluate import evaluate_methods
+    from continuum_gym.evaluation.methods import discover_policies
     from continuum_gym.evaluation.tables import HEADROOM
 
     hyperparams = tmp_path / "tiny.yml"

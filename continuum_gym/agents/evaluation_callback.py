@@ -22,7 +22,8 @@ EVAL_TASK_OFFSET = 0
 
 def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path, freq: int, n_episodes: int,
                        report: Callable[[int, float], None] | None = None,
-                       history: Mapping[str, Iterable[float]] | None = None) -> BaseCallback:
+                       history: Mapping[str, Iterable[float]] | None = None,
+                       helpers: Iterable[str] = ()) -> BaseCallback:
     """Periodic evaluation on held-out validation tasks (fixed ids), logged to TensorBoard and evaluations.npz.
 
     The validation split, not the test split: a sweep selects its configuration on these numbers, and
@@ -31,6 +32,7 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
     ``freq`` is in environment steps. ``history`` (``{column: list}``, from a checkpoint) continues an
     earlier learning curve: the next evaluation is ``freq`` steps after its last row, not at once.
     ``report(timesteps, value)`` is called after each evaluation (a sweep scheduler listens there).
+    ``helpers`` act after the policy, as in training (``envs/helpers.py``).
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -42,6 +44,9 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
     if kwargs.get("task") in config_class.test_only_tasks:
         kwargs["task"] = "random"
     core = make_core(env_id, n_episodes, **kwargs)
+    from continuum_gym.envs.helpers import make_helpers
+
+    made = make_helpers(env_id, tuple(helpers), core.config)
     task_ids = np.arange(EVAL_TASK_OFFSET, EVAL_TASK_OFFSET + n_episodes) % max(core.task_count, 1)
     metric = benchmark_of(env_id).headline_metric
     path = run_dir / "evaluations.npz"
@@ -76,7 +81,7 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
 
         def evaluate(self):
             self.last = self.num_timesteps
-            result = run_episodes(core, self.model, task_ids)
+            result = run_episodes(core, self.model, task_ids, helpers=made)
             self.history["timesteps"].append(int(self.num_timesteps))
             self.history["mean_return"].append(float(result["return"].mean()))
             self.history[metric].append(float(result[metric].mean()))

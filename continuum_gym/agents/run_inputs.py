@@ -35,7 +35,7 @@ _NOTED: set = set()  # (hyperparameter file, env id) pairs whose fallback block 
 # Run keys: read by the trainer, never passed to the algorithm. Expectations are in ``_RUN_RULES``.
 RUN_KEYS = ("n_timesteps", "n_envs", "env_kwargs", "residual_scale", "burn_in_steps", "eval_freq", "n_eval_episodes",
             "checkpoint_freq", "checkpoint_minutes", "keep_checkpoints", "policy", "action_noise_std",
-            "normalize_reward")
+            "normalize_reward", "helpers")
 # Constructor arguments the trainer sets itself; a hyperparameter file may not.
 TRAINER_SET = {"self": "", "env": "the environment comes from --env", "seed": "use --seed",
                "verbose": "set by the trainer", "device": "training runs on the CPU",
@@ -169,13 +169,24 @@ def _auto_or_number(prefix_ok: bool) -> tuple[str, Callable]:
     return "'auto' or a number", convert
 
 
-_RUN_RULES = {
+def _helper_list(value: Any) -> list:
+    """``helpers``: a list of names (checked against the env's helpers where the env is known: ``train``)."""
+    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+        raise _Invalid
+    return value
+
+
+_RUN_RULES: dict[str, tuple[str, Callable]] = {
     "n_timesteps": _whole(1), "n_envs": _whole(1), "env_kwargs": _mapping(),
     "residual_scale": _number(0.0, low_open=True), "burn_in_steps": _whole(0), "eval_freq": _whole(1),
     "n_eval_episodes": _whole(1), "checkpoint_freq": _whole(1),
     "checkpoint_minutes": _number(0.0, low_open=True, infinite=True, note=" (.inf: by steps only)"),
     "keep_checkpoints": _whole(1), "action_noise_std": _number(0.0), "normalize_reward": _flag(),
+    "helpers": ("a list of the env's helper names (envs/helpers.py)", _helper_list),
 }
+
+
+
 _ALGO_RULES = {
     "learning_rate": _schedule("learning_rate"), "clip_range": _schedule("clip_range"),
     "clip_range_vf": _number(0.0, low_open=True), "n_steps": _whole(1), "batch_size": _whole(1),

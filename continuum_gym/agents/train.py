@@ -70,9 +70,12 @@ class RunBusyError(RuntimeError):
     """Another process is training the same run directory."""
 
 
-def run_name(env_id: str, algo: str, base: str | None, seed: int) -> str:
+def run_name(env_id: str, algo: str, base: str | None, seed: int, helpers: list | tuple = ()) -> str:
+    """``<Env>_<algo>_<base>[+<helper>...]_seed<n>``: the run's folder, which says what acts."""
+    from continuum_gym.envs.helpers import row_name
+
     short = env_id.split("/")[-1].split("-")[0]
-    return f"{short}_{algo}_{base or 'pure_rl'}_seed{seed}"
+    return f"{short}_{algo}_{row_name(base or 'pure_rl', helpers)}_seed{seed}"
 
 
 def resolve_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
@@ -267,7 +270,13 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     check_combination(algo, hp, n, source)
     little = check_budget(_algo_class(algo), hp, total, base is not None, source,
                           "--steps" if steps is not None else "n_timesteps")
-    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed)
+    from continuum_gym.envs.helpers import check_helpers
+
+    try:
+        helpers = list(check_helpers(env_id, hp.get("helpers")))
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
+    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed, helpers)
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
     run = {**RUN_DEFAULTS, **hp}
@@ -284,7 +293,7 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     env_kwargs = dict(run["env_kwargs"] or {})
     env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
     try:  # the environment checks its own keywords; still nothing written
-        venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)
+        venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", helpers=helpers, **env_kwargs)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{source}: env_kwargs: {error}") from None
     if little:
@@ -299,7 +308,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
             stale.unlink()
         model, venv, saver, callbacks = _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir,
                                                unit, report)
-        config = {"env_id": env_id, "algo": algo, "base_controller": base, "seed": seed, "total_timesteps": total,
+        config = {"env_id": env_id, "algo": algo, "base_controller": base, **({"helpers": helpers} if helpers else {}),
+                  "seed": seed, "total_timesteps": total,
                   "n_envs": n, "hyperparams": hp, "env_kwargs": env_kwargs,
                   "env_config": _base_vec_env(venv).core.config.to_dict(), "continuum_gym_version": _version(),
                   "git_commit": _git_commit(), "python": sys.version.split()[0],
@@ -384,7 +394,8 @@ def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit
     history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
         run_dir / "evaluations.npz", unit.step)
     evaluator = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
-                                   int(run["n_eval_episodes"]), report, history=history)
+                                   int(run["n_eval_episodes"]), report, history=history,
+                                   helpers=run.get("helpers") or ())
     if unit is not None:
         evaluator.write()  # the curve as of the checkpoint: rows of the lost stretch go
     burn_steps = int(run["burn_in_steps"]) if base is not None else 0

@@ -53,6 +53,8 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         seed: row i is seeded with seed + i (as ``SyncVectorEnv``/``DummyVecEnv`` would seed it).
         render_mode: ``"rgb_array"`` for ``render()``/``get_images()`` (e.g. ``VecVideoRecorder``).
         camera: the camera those images are taken from.
+        helpers: names of the env's helpers that act on the (clipped) actions before each step
+            (``envs/helpers.py``), as ``train``'s ``helpers`` key and ``evaluate`` apply them.
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
@@ -60,13 +62,17 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
     metadata: dict[str, Any]
 
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
-                 camera: str = "external", **kwargs: Any) -> None:
+                 camera: str = "external", helpers: Any = (), **kwargs: Any) -> None:
+        from continuum_gym.envs.helpers import check_helpers, make_helpers
         from continuum_gym.envs.single import check_render_arguments
 
         self.env_id = env_id
         self.env_kwargs = {**registered_kwargs(env_id), **kwargs}
         num_envs = integer(num_envs, "num_envs", low=1)
+        self.helper_names = check_helpers(env_id, helpers)
         self.core = core_class(env_id)(num_envs=num_envs, **self.env_kwargs)
+        self._helpers = make_helpers(env_id, self.helper_names, self.core.config)
+        self._all_rows = np.ones(num_envs, dtype=np.uint8)
         self.render_mode, self.camera, _ = check_render_arguments({"render_modes": ["rgb_array"]}, self.core,
                                                                   render_mode, camera, False)
         super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
@@ -98,7 +104,14 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
 
     def step_wait(self) -> VecEnvStepReturn:
         actions, clipped = check_actions(self._actions, (self.num_envs,) + self.action_space.shape, "actions")
-        rewards, terminated, truncated = self.core.step(actions, np.ones(self.num_envs, dtype=np.uint8))
+        if self._helpers:
+            from continuum_gym.envs.helpers import apply_helpers
+
+            # in the policy's dtype, as evaluation applies them (a float32 policy's polished actions are float32)
+            given = np.asarray(self._actions).dtype
+            actions = apply_helpers(self._helpers, self.core.obs, actions.astype(given if given.kind == "f" else
+                                                                                 actions.dtype), self._all_rows)
+        rewards, terminated, truncated = self.core.step(actions, self._all_rows)
         self._returns += rewards
         self._lengths += 1
         rewards = rewards.astype(np.float32)

@@ -14,9 +14,8 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -25,183 +24,25 @@ from continuum_gym.envs.spec import (
     ENV_SPECS,
     EnvSpec,
     get_spec,
-    registered_base,
     registered_kwargs,
+)
+from continuum_gym.evaluation.methods import (
+    POLICY_DIR,
+    MethodRun,
+    baseline_methods,
+    beside_rows,
+    discover_policies,
+    discovered_methods,
+    own_bases,
+    sb3_algo,
+    split_env_kwargs,
+    trained_bases,
 )
 from continuum_gym.evaluation.tables import (
     aggregate,
     clipped_fractions,
     markdown,
 )
-
-if TYPE_CHECKING:
-    from stable_baselines3.common.base_class import BaseAlgorithm
-
-POLICY_DIR = Path(__file__).resolve().parents[1] / "agents" / "policies"
-
-
-# ---------------------------------------------------------------------- methods
-@dataclass
-class MethodRun:
-    """One run (training seed) of a method: its policy (None: the analytic baseline) and its env keywords."""
-
-    policy: Any
-    env_kwargs: dict
-    source: str | None = None  #: the policy's file or entry point (named when it fails)
-    algo: str | None = None  #: the algorithm that trained it (``ppo``, ``sac``, ``td3``), if known
-
-
-def discover_policies(directory: str | Path, skipped: dict | None = None) -> dict[str, dict[str, list[Path]]]:
-    """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``.
-
-    A run whose ``config.yml`` is unreadable, names no env or has no ``model.zip`` beside it is reported
-    on stderr and in ``skipped`` ({run: reason}); the other runs are still found. A directory that holds
-    no run at all is a warning: only the baselines (and ``--policy``) are evaluated then.
-    """
-    import yaml
-
-    found: dict[str, dict[str, list[Path]]] = {}
-    skipped = {} if skipped is None else skipped
-    directory = Path(directory)
-    if not directory.is_dir():
-        raise FileNotFoundError(f"--policies: no directory {directory}")
-    for config_path in sorted(directory.rglob("config.yml")):
-        run = config_path.parent
-        try:
-            if not (run / "model.zip").is_file():
-                raise ValueError("config.yml but no model.zip")
-            config = yaml.safe_load(config_path.read_text())
-            if not isinstance(config, dict) or "env_id" not in config:
-                raise ValueError("config.yml is empty or names no env_id")
-        except (OSError, ValueError, yaml.YAMLError) as error:
-            skipped[str(run)] = str(error).splitlines()[0]
-            print(f"continuum-gym evaluate: skipping {run}: {skipped[str(run)]}", file=sys.stderr)
-            continue
-        method = method_name(config.get("base_controller"), config.get("algo"))
-        found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
-    if not found and not skipped:
-        print(f"continuum-gym evaluate: warning: --policies {directory} holds no trained run (config.yml + "
-              "model.zip); evaluating the baselines only", file=sys.stderr)
-    return found
-
-
-def _sb3_algo(policy: Any) -> str | None:
-    """``ppo``, ``sac`` or ``td3`` for a stable-baselines3 model of those classes, else None."""
-    name = type(policy).__name__.lower()
-    return name if name in ("ppo", "sac", "td3") and hasattr(policy, "predict") else None
-
-
-def method_name(base: str | None, algo: str | None) -> str:
-    """A learned method's row: ``residual_<base>`` / ``pure_rl`` for PPO (the headline rows), else with
-    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``)."""
-    from continuum_gym.plugins import split_reference
-
-    name = f"residual_{split_reference(base)[1]}" if base else "pure_rl"
-    return name if algo in (None, "ppo") else f"{name}_{algo}"
-
-
-def load_policy(run: Path) -> tuple[BaseAlgorithm, dict[str, Any]]:
-    """(SB3 model, its run's config dict) of a run directory."""
-    import yaml
-    from stable_baselines3 import PPO, SAC, TD3
-
-    config = yaml.safe_load((run / "config.yml").read_text())
-    algorithms: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3}
-    if config.get("algo") not in algorithms:
-        raise ValueError(f"policy {run}: algo must be one of {sorted(algorithms)}, got {config.get('algo')!r}")
-    return algorithms[config["algo"]].load(run / "model.zip", device="cpu"), config
-
-
-def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
-    """The env keywords of a run's config that define how its policy acts (``spec.policy_keys``).
-
-    Runs write their full env config (``env_config``); older runs only their keyword arguments
-    (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
-    """
-    source = config.get("env_config") or config.get("env_kwargs") or {}
-    picked = {key: value for key, value in source.items() if key in benchmark_of(spec).policy_keys}
-    spec.config_class.from_kwargs(**picked)  # the same checks as the env's: a broken config fails here, named
-    return picked
-
-
-def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict, dict]:
-    """(environment, policy, ignored) keywords of ``env_kwargs``.
-
-    The environment part (robot, cone, limits, timing, rewards) is the env every method runs in; the
-    policy part (``spec.policy_keys``: base controller, residual scale and space, ...) only the evaluated
-    policy's; task, split and grid are set by the protocol and recorded as ignored.
-    """
-    from continuum_gym.evaluation.benchmark import PROTOCOL_KEYS
-
-    env_kwargs = dict(env_kwargs or {})
-    try:  # named errors before anything runs
-        spec.config_class.from_kwargs(**env_kwargs)
-    except ValueError as error:
-        raise type(error)(f"env_kwargs (--env-kwargs): {error}") from None
-    ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
-    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in benchmark_of(spec).policy_keys}
-    return env_kwargs, policy, ignored
-
-
-def baseline_methods(spec: EnvSpec, own: list | tuple = ()) -> list:
-    """[(baseline, [MethodRun])] in table order: the residual env with a zero residual is the baseline.
-
-    ``own``: registered controllers (names or ``"module:name"``) that get a row of their own after the
-    built-in baselines, named by the controller (a residual trained on one is ``residual_<name>``).
-    """
-    from continuum_gym.plugins import split_reference
-
-    names = list(spec.baselines)
-    rows = [(base, [MethodRun(None, {"base_controller": base})]) for base in spec.baselines]
-    for reference in own:
-        name = split_reference(reference)[1]
-        if name not in names:
-            names.append(name)
-            rows.append((name, [MethodRun(None, {"base_controller": reference})]))
-    return rows
-
-
-def own_bases(spec: EnvSpec, env_id: str, methods: list, environment: dict | None = None) -> list:
-    """The registered controllers in play: the env's packaged bases (fitted to the paper's robots: only when
-    ``environment`` changes none of ``spec.physics``), the id's own base and those the learned methods were
-    trained on."""
-    nominal = not any(key in (environment or {}) for key in benchmark_of(spec).physics)
-    candidates = [*(spec.config_class.packaged_controllers if nominal else ()), registered_base(env_id)]
-    candidates += [run.env_kwargs.get("base_controller") for _, runs in methods for run in runs]
-    return [c for c in dict.fromkeys(candidates) if isinstance(c, str) and c not in spec.baselines]
-
-
-def trained_bases(methods: list) -> dict:
-    """{method: the base controller's row name} of each method whose runs say what they were trained on."""
-    from continuum_gym.plugins import split_reference
-
-    out = {}
-    for name, runs in methods:
-        base = runs[0].env_kwargs.get("base_controller") if runs else None
-        if isinstance(base, str):
-            out[name] = split_reference(base)[1]
-    return out
-
-
-def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict, env_id: str | None = None) -> list:
-    """[(method, [MethodRun])] of the SB3 runs found by :func:`discover_policies` for ``env_id`` (``spec``'s env).
-
-    A run that cannot be loaded is reported on stderr and in ``skipped`` ({run: reason}), not fatal.
-    """
-    out = []
-    for method, runs in sorted(policies.get(env_id or spec.env_id, {}).items()):
-        entries = []
-        for run in runs:
-            try:
-                model, config = load_policy(run)
-                entries.append(MethodRun(model, policy_env_kwargs(spec, config), str(Path(run) / "model.zip"),
-                                         config.get("algo")))
-            except Exception as error:  # noqa: BLE001 - any broken run is reported and skipped, the rest runs
-                skipped[str(run)] = f"{type(error).__name__}: {error}"
-                print(f"continuum-gym evaluate: skipping {run}: {error}", file=sys.stderr)
-        if entries:
-            out.append((method, entries))
-    return out
 
 
 # ---------------------------------------------------------------------- evaluation
@@ -215,6 +56,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
     """
     from tqdm.auto import tqdm
 
+    from continuum_gym.envs.helpers import make_helpers
     from continuum_gym.evaluation.benchmark import episode_count, task_sets
     from continuum_gym.evaluation.policies import PolicyError, as_predictor
     from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
@@ -248,7 +90,8 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
                                   f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
                                   f"{robot}); pass the keywords it was trained with "
                                   "(--env-kwargs, or its registered id with --import)")
-            result = run_episodes(core, policy, np.arange(count), record=task_set.task == benchmark_of(spec).trace_task)
+            result = run_episodes(core, policy, np.arange(count), record=task_set.task == benchmark_of(spec).trace_task,
+                                  helpers=make_helpers(env_id, run.helpers, core.config))
         except PolicyError as error:
             failed.add(name)
             skipped[f"{name}[{index}]"] = str(error)
@@ -285,10 +128,14 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     # A user's registered id: its keywords define the env (robot, cone, ...) and its base, as gym.make's.
     environment, policy_kwargs, ignored = split_env_kwargs(spec, {**registered_kwargs(env_id), **(env_kwargs or {})})
     extra = [(name, [MethodRun(run.policy, {**policy_kwargs, **run.env_kwargs}, run.source,
-                               run.algo or _sb3_algo(run.policy)) for run in runs]) for name, runs in extra]
+                               run.algo or sb3_algo(run.policy), run.helpers) for run in runs])
+             for name, runs in extra]
     skipped: dict = {}
     learned = discovered_methods(spec, policies or {}, skipped, env_id) + extra
-    methods = baseline_methods(spec, own_bases(spec, env_id, learned, environment)) + learned
+    baselines = applicable(spec, baseline_methods(spec, own_bases(spec, env_id, learned, environment)), environment,
+                           skipped)
+    bases, ablations = beside_rows(baselines + learned)  # a learned row's base with its helpers, the row without
+    methods = baselines + bases + learned + ablations
     results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
     table = aggregate(env_id, results, optimum, grid, trained_bases(methods))
@@ -305,9 +152,23 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     return table, results, meta
 
 
+def applicable(spec: EnvSpec, baselines: list, environment: dict, skipped: dict) -> list:
+    """The baseline rows the protocol env can build: a base made for the paper's robot (``arc_plan`` plans on the
+    7-DoF arc) has no row on a variant it does not fit, and ``skipped`` says why."""
+    out = []
+    for name, runs in baselines:
+        try:
+            spec.config_class.from_kwargs(**environment, **runs[0].env_kwargs)
+        except ValueError as error:
+            skipped[name] = f"not applicable to this env: {error}"
+            continue
+        out.append((name, runs))
+    return out
+
+
 def evaluate_policy(policy: Any, env_id: str, *, name: str = "policy", env_kwargs: dict | None = None,
                     episodes: int = 32, grid: int = 21, split: str = "test", progress: bool = True,
-                    out: str | Path | None = None) -> dict:
+                    out: str | Path | None = None, helpers: list | tuple = ()) -> dict:
     """The benchmark table of ``policy`` beside every baseline and the offline optimum of ``env_id``.
 
     Args:
@@ -326,11 +187,18 @@ def evaluate_policy(policy: Any, env_id: str, *, name: str = "policy", env_kwarg
         split: ``"validation"`` for model selection, ``"test"`` for final numbers only.
         progress: progress bars.
         out: a directory to also write ``results.md`` and ``results.json`` (the CLI's files) into.
+        helpers: names of the env's helpers that act after the policy (``envs/helpers.py``), e.g.
+            ``["overlap_polish"]``; the row is then named with them (``policy+overlap_polish``), and the base
+            with the same helpers and a zero residual, and the policy without them, get rows beside it.
 
     Returns:
         ``{method: {metric: {"mean", "iqm", "ci_low", "ci_high", ...}}}``, the per-env object of the CLI's JSON.
     """
-    table, results, meta = evaluate_methods(env_id, [(str(name), [MethodRun(policy, {})])], None,
+    from continuum_gym.envs.helpers import check_helpers, row_name
+
+    helpers = check_helpers(env_id, helpers)
+    name = row_name(str(name), helpers)
+    table, results, meta = evaluate_methods(env_id, [(name, [MethodRun(policy, {}, helpers=helpers)])], None,
                                             env_kwargs=env_kwargs, episodes=episodes, grid=grid, split=split,
                                             progress=progress)
     if name not in results:
@@ -375,6 +243,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also evaluate the policy returned by this function (any batched callable, SB3 model, "
                              "torch.nn.Module or object with predict), e.g. my_pkg.agents:make_policy")
     parser.add_argument("--name", default="policy", help="table row of --policy (default: policy)")
+    parser.add_argument("--helpers", nargs="+", default=(), metavar="NAME",
+                        help="helpers that act after --policy, in order (e.g. overlap_polish for ViewTracking; "
+                             "docs/protocol.md): its row is named NAME+helper, and its base with them gets a row")
     parser.add_argument("--env-kwargs", default=None, metavar="JSON",
                         help="env keyword arguments (JSON object) the evaluated env is built with, e.g. the ones "
                              "--policy was trained with; physics keywords apply to every method")
@@ -449,10 +320,15 @@ def run(args: argparse.Namespace) -> int:
         policies = discover_policies(args.policies, unusable)
         extra = []
         if args.policy:
+            from continuum_gym.envs.helpers import check_helpers, row_name
             from continuum_gym.evaluation.policies import as_predictor, load_entry_point
 
-            extra = [(args.name, [MethodRun(as_predictor(load_entry_point(args.policy), args.name, args.policy), {},
-                                            args.policy)])]
+            helpers = check_helpers(env_ids[0], args.helpers)
+            extra = [(row_name(args.name, helpers), [MethodRun(as_predictor(load_entry_point(args.policy), args.name,
+                                                                            args.policy), {}, args.policy,
+                                                               helpers=helpers)])]
+        elif args.helpers:
+            raise ValueError("--helpers acts after --policy: pass --policy MODULE:FUNCTION")
     except (ValueError, TypeError, FileNotFoundError) as error:
         print(f"continuum-gym evaluate: {error}", file=sys.stderr)
         return 2

@@ -7,12 +7,14 @@ its spec says (``EnvSpec.episode_metrics``).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from continuum_gym.envs.batched import BatchedCore
+from continuum_gym.envs.helpers import apply_helpers
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 
 
@@ -45,7 +47,7 @@ def make_core(env_id: str, num_envs: int, **env_kwargs: Any) -> BatchedCore:
 
 
 def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: Progress | None = None,
-                 record: bool = False) -> dict[str, np.ndarray]:
+                 record: bool = False, helpers: Sequence[Callable[..., np.ndarray]] = ()) -> dict[str, np.ndarray]:
     """Run one episode per task id (all in one batch) until each ends; returns per-episode metrics.
 
     Args:
@@ -55,6 +57,8 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
         task_ids: task instance per row.
         progress: optional tqdm-like object updated once per step.
         record: also return per-step traces (``trace_<value>`` arrays of shape (steps, N), NaN after the end).
+        helpers: helpers made for ``core``'s config (``envs.helpers.make_helpers``), applied in order to the
+            clipped actions before each step.
 
     Returns:
         dict of metric name -> (N,) array (the spec's episode metrics), plus ``return``, ``length`` and
@@ -82,7 +86,7 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
         actions = predictor.act(core.obs.astype(np.float32), action_dim)
         outside = np.abs(actions) > 1.0
         clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]
-        actions = np.clip(actions, -1.0, 1.0)
+        actions = apply_helpers(helpers, core.obs, np.clip(actions, -1.0, 1.0), active)
         rewards, terminated, truncated = core.step(np.ascontiguousarray(actions), active)
         alive = active.astype(bool)
         values = core.step_values()

@@ -54,14 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _resolve_policy(name: str, spec):
-    from continuum_gym.evaluation.evaluate import (
-        POLICY_DIR,
-        load_policy,
-        policy_env_kwargs,
-    )
+    from continuum_gym.evaluation.methods import POLICY_DIR, load_policy, policy_env_kwargs
 
     if name == "baseline":
-        return None, {}
+        return None, {}, ()
     path = Path(name)
     if not path.exists():
         candidates = sorted(POLICY_DIR.rglob(f"{name}/config.yml"))
@@ -71,7 +67,7 @@ def _resolve_policy(name: str, spec):
     if path.suffix == ".zip":
         path = path.parent
     model, config = load_policy(path)
-    return model, policy_env_kwargs(spec, config)
+    return model, policy_env_kwargs(spec, config), tuple(config.get("helpers") or ())
 
 
 def _strip(values, width: int, height: int, vmax: float = 1.0) -> np.ndarray:
@@ -144,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
         if size * supersample > 4096:
             raise ValueError(f"--size x --supersample must be <= 4096 pixels; got {size} x {supersample}")
         external_camera = _external_camera(args)
-        model, env_kwargs = _resolve_policy(args.policy, spec)
+        model, env_kwargs, helpers = _resolve_policy(args.policy, spec)
     except (ValueError, FileNotFoundError) as error:
         print(f"continuum-gym render: {error}", file=sys.stderr)
         return 2
@@ -155,6 +151,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         task = args.task or registered_kwargs(args.env).get("task") or benchmark_of(spec).record_task  # a registered id's own
         env = gym.make(args.env, task=task, task_split="test", render_mode="rgb_array", **env_kwargs)
+        if helpers:  # the run's helpers act after it, as in its evaluation (envs/helpers.py)
+            from continuum_gym.envs.helpers import HelperWrapper
+
+            env = HelperWrapper(env, helpers)
     except ValueError as error:  # --task, or a policy's env kwargs, refused by the env
         print(f"continuum-gym render: --task / policy env kwargs: {error}", file=sys.stderr)
         return 2

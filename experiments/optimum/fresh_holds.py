@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     import continuum_gym.envs.occlusion.tasks as occlusion_tasks
     from continuum_gym.envs.benchmark import benchmark_of
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
+    from continuum_gym.evaluation.methods import load_policy, policy_env_kwargs
     from continuum_gym.evaluation.optimum.occlusion import env_hold_test_optimum
     from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
 

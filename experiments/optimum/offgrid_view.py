@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--count", type=int, default=1000, help="off-grid targets (test pan_tilt ids 0..count-1)")
     args = parser.parse_args(argv)
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
+    from continuum_gym.evaluation.methods import load_policy, policy_env_kwargs
     from continuum_gym.evaluation.rollout import ZeroResidual
 
     rows = []

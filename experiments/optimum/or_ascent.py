@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     import val_eval
 
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
+    from continuum_gym.evaluation.methods import load_policy, policy_env_kwargs
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path)

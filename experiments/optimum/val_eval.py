@@ -122,7 +122,7 @@ def load(target: Path):
     import yaml
     from stable_baselines3 import PPO, SAC, TD3
 
-    from continuum_gym.evaluation.evaluate import load_policy
+    from continuum_gym.evaluation.methods import load_policy
 
     if target.is_dir():
         model, config = load_policy(target)
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         args.tag = args.tag or args.pending
         args.targets += pending(args.root, args.pending)
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import policy_env_kwargs
+    from continuum_gym.evaluation.methods import policy_env_kwargs
 
     (args.root / "results" / "arrays").mkdir(parents=True, exist_ok=True)
     jobs = [(None, None) for _ in range(1 if args.base else 0)] + [(t, None) for t in args.targets]

@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     from continuum_gym.agents.residual import ActorBurnIn
     from continuum_gym.envs.sb3 import ContinuumSB3VecEnv
     from continuum_gym.envs.spec import get_spec
-    from continuum_gym.evaluation.evaluate import policy_env_kwargs
+    from continuum_gym.evaluation.methods import policy_env_kwargs
     from continuum_gym.plugins import import_modules
 
     import_modules(args.imports, "--import module")

@@ -1,4 +1,4 @@
-"""OcclusionAvoidance's ``arc_plan``: on hold tasks the base tracks ``hold_arc_plan``'s trajectory (computed here
+"""OcclusionAvoidance's base ``arc_plan``: on hold tasks the projected gradient tracks ``hold_arc_plan``'s trajectory (computed here
 independently, in the kinematics alone), other tasks are untouched to the bit, the policy pays only for its own
 action, and bad values are rejected by name."""
 
@@ -32,7 +32,7 @@ def _run(core: OcclusionCore, ids: np.ndarray, actions=None, steps: int | None =
 
 @pytest.fixture(scope="module")
 def planned_hold():
-    core = OcclusionCore(len(IDS), task="hold", arc_plan=True, **KW)
+    core = OcclusionCore(len(IDS), task="hold", base_controller="arc_plan", **KW)
     core.reset_rows(np.arange(len(IDS)), IDS)
     starts = core.q.copy()
     plans = [hold_arc_plan(core.robot, q0, core.limits, visibility=GUARD, cone=core.cone,
@@ -60,7 +60,7 @@ def test_zero_action_executes_the_plan(planned_hold):
 def test_plan_beats_the_projected_gradient_on_hold():
     plain = OcclusionCore(len(IDS), task="hold", **KW)
     voi_plain, _ = _run(plain, IDS)
-    planned = OcclusionCore(len(IDS), task="hold", arc_plan=True, **KW)
+    planned = OcclusionCore(len(IDS), task="hold", base_controller="arc_plan", **KW)
     voi_plan, _ = _run(planned, IDS)
     assert voi_plan.mean() < voi_plain.mean() - 0.02
 
@@ -70,8 +70,8 @@ def test_moving_targets_are_untouched_to_the_bit():
     actions = np.clip(rng.normal(0.0, 0.3, (40, 4, 8)), -1.0, 1.0)
     ids = np.arange(4)
     out = []
-    for flag in (False, True):
-        core = OcclusionCore(4, task="random", arc_plan=flag, **KW)
+    for base in ("projected_gradient", "arc_plan"):
+        core = OcclusionCore(4, task="random", base_controller=base, **KW)
         voi, terms = _run(core, ids, lambda k: actions[k], steps=40)
         out.append((voi, terms, core.q.copy(), core.obs.copy(), core.rewards.copy()))
     for a, b in zip(*out, strict=True):
@@ -79,7 +79,7 @@ def test_moving_targets_are_untouched_to_the_bit():
 
 
 def test_the_policy_pays_for_its_own_action():
-    core = OcclusionCore(2, task="hold", arc_plan=True, **KW)
+    core = OcclusionCore(2, task="hold", base_controller="arc_plan", **KW)
     action = np.full((2, 8), 0.25)
     _, terms = _run(core, IDS[:2], lambda k: action, steps=3)
     expected = -core.weights["action"] * np.sum(action ** 2, axis=1) / 8
@@ -88,7 +88,7 @@ def test_the_policy_pays_for_its_own_action():
 
 
 def test_mixed_tasks_plan_only_the_holds():
-    core = OcclusionCore(4, task="mixed", arc_plan=True, **KW)
+    core = OcclusionCore(4, task="mixed", base_controller="arc_plan", **KW)
     plain = OcclusionCore(4, task="mixed", **KW)
     ids = np.arange(4)  # even ids hold, odd ids follow a random trajectory
     voi_plan, _ = _run(core, ids, steps=30)
@@ -97,31 +97,58 @@ def test_mixed_tasks_plan_only_the_holds():
     assert not np.array_equal(voi_plan[:, 0::2], voi_plain[:, 0::2])
 
 
-@pytest.mark.parametrize("value", ["yes", 1, 0.0, None])
-def test_bad_arc_plan_is_named(value):
+def test_arc_plan_is_a_base_with_its_own_residual_scale():
+    """A named base of the env (a baseline row of evaluate), whose residual scale defaults to 2; the others' to 0.3."""
+    assert "arc_plan" in OcclusionConfig.baselines
+    assert OcclusionConfig(base_controller="arc_plan").residual_scale == 2.0
+    assert OcclusionConfig(base_controller="arc_plan", residual_scale=3.0).residual_scale == 3.0
+    assert OcclusionConfig().residual_scale == 0.3
     with pytest.raises(ValueError, match="arc_plan"):
-        OcclusionConfig(arc_plan=value)
-
-
-def test_arc_plan_needs_a_base():
-    with pytest.raises(ValueError, match="arc_plan.*base_controller"):
-        OcclusionConfig(arc_plan=True, base_controller=None)
-    assert OcclusionConfig(arc_plan=np.bool_(True), residual_scale=2.0).arc_plan is True
+        OcclusionConfig.from_kwargs(arc_plan=True)  # the 0.2 option is gone, by name
 
 
 @pytest.mark.parametrize("scale", [0.3, 1.99])
 def test_arc_plan_needs_the_reach_of_its_correction(scale):
     """The plan's correction of the base reaches twice the rate limits: a smaller residual scale would clip it."""
-    with pytest.raises(ValueError, match="arc_plan.*residual_scale >= 2.*got"):
-        OcclusionConfig(arc_plan=True, residual_scale=scale)
+    with pytest.raises(ValueError, match="base_controller='arc_plan' needs residual_scale >= 2.*got"):
+        OcclusionConfig(base_controller="arc_plan", residual_scale=scale)
 
 
 def test_no_plan_under_a_model_error():
     """The plans run along the visibility guard's edge, which a mismatched tip crosses: every row keeps the base."""
     out = []
-    for flag in (False, True):
-        core = OcclusionCore(2, task="hold", arc_plan=flag, model_error="mild", **KW)
+    for base in ("projected_gradient", "arc_plan"):
+        core = OcclusionCore(2, task="hold", base_controller=base, model_error="mild", **KW)
         voi, terms = _run(core, IDS[:2], steps=20)
         out.append((voi, terms, core.q.copy(), core.obs.copy()))
     for a, b in zip(*out, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_run_trained_with_the_old_option_loads_as_residual_arc_plan(tmp_path):
+    """A 0.2 run's config.yml (``arc_plan: true`` beside ``base_controller: projected_gradient``) is found as
+    ``residual_arc_plan`` and acts on the arc_plan base."""
+    import yaml
+
+    from continuum_gym.envs.spec import get_spec
+    from continuum_gym.evaluation.methods import discover_policies, policy_env_kwargs, read_run_config
+
+    old = {"env_id": "ContinuumGym/OcclusionAvoidance-v0", "algo": "ppo", "base_controller": "projected_gradient",
+           "seed": 0, "hyperparams": {"env_kwargs": {"task": "mixed", "arc_plan": True}},
+           "env_kwargs": {"task": "mixed", "arc_plan": True, "base_controller": "projected_gradient",
+                          "residual_scale": 2.0},
+           "env_config": {"base_controller": "projected_gradient", "residual_scale": 2.0, "arc_plan": True,
+                          "visibility_guard": 0.69}}
+    run = tmp_path / "OcclusionAvoidance_ppo_projected_gradient_seed0"
+    run.mkdir()
+    (run / "config.yml").write_text(yaml.safe_dump(old))
+    (run / "model.zip").write_bytes(b"")
+    assert list(discover_policies(tmp_path)["ContinuumGym/OcclusionAvoidance-v0"]) == ["residual_arc_plan"]
+    config = read_run_config(run, old)
+    kwargs = policy_env_kwargs(get_spec("ContinuumGym/OcclusionAvoidance-v0"), config)
+    assert kwargs == {"base_controller": "arc_plan", "residual_scale": 2.0, "visibility_guard": 0.69}
+    assert "arc_plan" not in config["hyperparams"]["env_kwargs"]
+    # without the option the same run stays a residual on the projected gradient
+    plain = {**old, "env_config": {"base_controller": "projected_gradient", "residual_scale": 2.0}}
+    plain.pop("env_kwargs")
+    assert read_run_config(run, plain)["env_config"]["base_controller"] == "projected_gradient"

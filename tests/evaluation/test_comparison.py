@@ -22,8 +22,9 @@ from continuum_gym.evaluation.comparison import (
     read_wall_clock,
     training_cost,
 )
-from continuum_gym.evaluation.evaluate import discover_policies, evaluate_methods
+from continuum_gym.evaluation.evaluate import evaluate_methods
 from continuum_gym.evaluation.figures import draw_learning_curves, learning_curves
+from continuum_gym.evaluation.methods import discover_policies
 
 ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = ROOT / "reference-runs"

@@ -12,7 +12,8 @@ import torch
 
 from continuum_gym.cli import main
 from continuum_gym.evaluation import evaluate_policy
-from continuum_gym.evaluation.evaluate import MethodRun, evaluate_methods, write_results
+from continuum_gym.evaluation.evaluate import evaluate_methods, write_results
+from continuum_gym.evaluation.methods import MethodRun
 from continuum_gym.evaluation.policies import (
     PolicyError,
     as_predictor,
@@ -232,7 +233,7 @@ def test_learned_rows_are_named_by_base_and_algorithm_and_say_how_many_seeds(tmp
     """PPO keeps the headline names; SAC and TD3 rows carry their algorithm; every learned row says it."""
     import yaml
 
-    from continuum_gym.evaluation.evaluate import discover_policies, method_name
+    from continuum_gym.evaluation.methods import discover_policies, method_name
 
     assert method_name("projected_gradient", "ppo") == "residual_projected_gradient"
     assert method_name("my_lab.plugins:mylab_dls", "sac") == "residual_mylab_dls_sac"

@@ -10,7 +10,7 @@ import continuum_gym.agents
 from continuum_gym.baselines import OcclusionLimits
 from continuum_gym.envs.occlusion.tasks import hold_start_pool
 from continuum_gym.envs.spec import get_spec
-from continuum_gym.evaluation.evaluate import load_policy, policy_env_kwargs
+from continuum_gym.evaluation.methods import load_policy, policy_env_kwargs
 from continuum_gym.evaluation.optimum import (
     GAMMA_RESOLUTION,
     arc_travel,
@@ -27,7 +27,7 @@ from continuum_gym.robots import MultiBackboneRobot
 
 OCC = "ContinuumGym/OcclusionAvoidance-v0"
 POLICY = (Path(continuum_gym.agents.__file__).parent / "policies" / "OcclusionAvoidance-v0"
-          / "OcclusionAvoidance_ppo_projected_gradient_seed0")
+          / "OcclusionAvoidance_ppo_arc_plan_seed0")
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ BENCHMARK = register_benchmark(Benchmark(
     headline_baseline="projected_gradient",
     headline_metric="mean_voi",
     diagnostics=("visibility_guarded_fraction",),
-    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard", "arc_plan"),
+    policy_keys=("base_controller", "residual_scale", "residual_space", "visibility_guard"),
     references=(ReferenceRow("offline_optimum", "hold_test", "optimum_voi", "mean_voi", "per_task", "hold",
                              "hold test tasks only: lowest VOI on the self-motion arc x feasible gamma"),
                 # the optimum is a configuration; an episode starts elsewhere and travels at the rate limits

@@ -15,7 +15,7 @@ from continuum_gym.envs.config import (
     resolve_robot,
     spec,
 )
-from continuum_gym.validation import boolean, choice, describe, fraction
+from continuum_gym.validation import choice, describe, fraction
 
 #: The built-in task families' names (the paper's ``circle`` exists only in the test split), here rather than
 #: in ``tasks.py`` so that the config (and ``continuum-gym --help``) does not import the task generators.
@@ -32,7 +32,11 @@ class OcclusionConfig(EnvConfig):
 
     env_id: ClassVar[str] = "ContinuumGym/OcclusionAvoidance-v0"
     #: The analytic controllers a residual can be built on (the env spec lists them from here).
-    baselines: ClassVar[tuple] = ("minimum_norm", "projected_gradient")
+    #: ``arc_plan`` is the projected gradient that, on hold tasks, tracks a trajectory along the self-motion arc
+    #: planned when the episode starts (``plan_base.py``).
+    baselines: ClassVar[tuple] = ("minimum_norm", "projected_gradient", "arc_plan")
+    #: The residual scale a base takes when ``residual_scale`` is not given (any other base: 0.3).
+    base_residual_scales: ClassVar[dict] = {"arc_plan": 2.0}
     default_weights: ClassVar[dict] = {"voi": 1.0, "tip_position": 0.05, "tip_orientation": 0.05, "visibility": 10.0,
                                        "action": 0.01}
     residual_spaces: ClassVar[tuple] = ("nullspace", "joint")
@@ -51,9 +55,14 @@ class OcclusionConfig(EnvConfig):
     task_split: str = field(default="train", metadata=spec(
         doc="`train`, `validation` (for model selection) or `test`: disjoint task instances", type_name="str"))
     base_controller: str | None = field(default="projected_gradient", metadata=spec(
-        doc="residual base: `projected_gradient`, `minimum_norm`, or `None` (pure RL)", type_name="str or None"))
-    residual_scale: float = field(default=0.3, metadata=spec(
-        unit="fraction of the rate limits", doc="residual at action 1.0 (in (0, 10])", type_name="float"))
+        doc="residual base: `projected_gradient`, `minimum_norm`, `arc_plan` (on hold tasks the projected gradient "
+            "tracks a trajectory along the self-motion arc planned when the episode starts, about 1 s per start, "
+            "cached per process; other tasks, and every task under a `model_error`, keep the projected gradient), "
+            "a registered controller, or `None` (pure RL)", type_name="str or None"))
+    residual_scale: float = field(default=None, metadata=spec(  # type: ignore[assignment]  # None: resolved below
+        unit="fraction of the rate limits", doc="residual at action 1.0 (in (0, 10]); `None`: 0.3, or 2 with the "
+        "`arc_plan` base (which needs >= 2: its correction of the projected gradient, up to twice the rate limits, "
+        "travels in the residual)", type_name="float or None"))
     residual_space: str = field(default="nullspace", metadata=spec(
         doc="`nullspace` (projected into the tip Jacobian's null space at every substep) or `joint`",
         type_name="str"))
@@ -65,11 +74,6 @@ class OcclusionConfig(EnvConfig):
         "the tip beyond this angle from the view axis (in (0, 1); `None`: off); it does not limit the joint residual "
         "or the baseline, so it guarantees visibility only as far as the rotation goes (env docstring)",
         type_name="float or None"))
-    arc_plan: bool = field(default=False, metadata=spec(
-        doc="on hold tasks the residual's base tracks a trajectory along the self-motion arc planned when the "
-            "episode starts (`hold_arc_plan`, about 1 s per start, cached per process); other tasks, and every task "
-            "under a `model_error`, keep the base. Needs a `base_controller` and `residual_scale` >= 2",
-        type_name="bool"))
     control_dt: float = field(default=0.01, metadata=spec(unit="s", doc="policy step (in (0, 0.1])",
                                                           type_name="float"))
     substeps: int = field(default=10, metadata=spec(doc="kinematic substeps per policy step (the paper's 1 ms "
@@ -117,17 +121,19 @@ class OcclusionConfig(EnvConfig):
             set_(self, "cone", LensCone(lens_model=self.lens_model or "literal"))
         assert self.cone is not None  # set just above when it was not given (mypy does not see object.__setattr__)
         set_(self, "lens_model", self.cone.lens_model)
+        if self.residual_scale is None:
+            set_(self, "residual_scale", self.base_residual_scales.get(self.base_controller, 0.3))
         check_common(self)
         check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
-        set_(self, "arc_plan", boolean(self.arc_plan, "arc_plan"))
-        if self.arc_plan and self.base_controller is None:
-            raise ValueError("arc_plan=True needs a base_controller (the plan is tracked on top of it); "
-                             "got base_controller=None")
-        if self.arc_plan and self.residual_scale < 2.0:
+        if self.base_controller == "arc_plan" and self.robot.dof != 7:
+            raise ValueError(f"base_controller='arc_plan' plans along the one-dimensional self-motion arc of a robot "
+                             f"with 7 DoF (3 segments and insertion); got a robot with dof={self.robot.dof}")
+        if self.base_controller == "arc_plan" and self.residual_scale < 2.0:
             # the plan's correction (plan rate - base rate) reaches twice the rate limits, and is sent as residual
-            raise ValueError(f"arc_plan=True needs residual_scale >= 2 (the plan's correction of the base, up to "
-                             f"twice the rate limits, must fit in the residual's reach); got {self.residual_scale!r}")
+            raise ValueError(f"base_controller='arc_plan' needs residual_scale >= 2 (the plan's correction of the "
+                             f"projected gradient, up to twice the rate limits, must fit in the residual's reach); "
+                             f"got {self.residual_scale!r}")
         if self.visibility_guard is not None:
             if isinstance(self.visibility_guard, str):
                 raise ValueError(f"visibility_guard must be a number in (0, 1) (fraction of the cone half-angle) "

@@ -38,7 +38,9 @@ def build(config: OcclusionConfig) -> Built:
     from continuum_gym.baselines import make_controller
 
     robot, cone, limits = config.robot, config.cone, config.limits
-    builtin = config.base_controller if config.base_controller in config.baselines else "projected_gradient"
+    # arc_plan is the projected gradient underneath its plans (``plan_base.py``)
+    builtin = config.base_controller if config.base_controller in ("minimum_norm", "projected_gradient") \
+        else "projected_gradient"
     controller: Any = make_controller(str(builtin), robot=robot, cone=cone, limits=limits)
     lower, upper, rate_limit = limits.bounds(robot.n_segments)
     rate_scale_vec = np.append(rate_limit, limits.gamma_rate)
@@ -52,7 +54,7 @@ def build(config: OcclusionConfig) -> Built:
         visibility_fraction=VISIBILITY_FRACTION, visibility_guard=-1.0 if guard is None else float(guard))
     layers: tuple = ()
     # no plans under a model error: they run along the guard's edge, which the true tip crosses (plan_base.py)
-    if config.arc_plan and not _model_error(config):
+    if config.base_controller == "arc_plan" and not _model_error(config):
         from continuum_gym.envs.occlusion.plan_base import ArcPlanBase
 
         layers = (ArcPlanBase,)

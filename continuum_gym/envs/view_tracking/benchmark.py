@@ -11,7 +11,7 @@ BENCHMARK = register_benchmark(Benchmark(
                TaskSet("coverage", grid=True)),
     headline_baseline="dimension_reduced",
     headline_metric="mean_or",
-    policy_keys=("base_controller", "residual_scale", "residual_space", "observe_target", "overlap_polish"),
+    policy_keys=("base_controller", "residual_scale", "residual_space", "observe_target"),
     references=(
         ReferenceRow("offline_optimum", "coverage", "optimum_or", "coverage_percent", "coverage", "coverage"),
         ReferenceRow("bounded_least_squares", "coverage", "bounded_least_squares_or", "coverage_percent", "coverage",

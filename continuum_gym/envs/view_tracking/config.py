@@ -75,9 +75,6 @@ class ViewTrackingConfig(EnvConfig):
     observe_target: bool = field(default=False, metadata=spec(
         doc="append the da Vinci configuration [L_dV, yaw, pitch, sin roll, cos roll] to the observation",
         type_name="bool"))
-    overlap_polish: float | None = field(default=None, metadata=spec(
-        unit="action units", doc="largest step of a one-step lookahead on the overlap ratio applied to each action "
-        "while OR >= 0.75 (in (0, 1]; joint residual only; `None`: off)", type_name="float or None"))
     robot: Any = field(default=None, metadata=spec(
         doc="a `ContinuumEndoscope` (lengths, joint limits) or a registered robot's name; `None`: the paper's",
         type_name="ContinuumEndoscope, str or None"))
@@ -118,12 +115,6 @@ class ViewTrackingConfig(EnvConfig):
                 for k, v in enumerate(values)))
         set_(self, "grid", integer(self.grid, "grid (points per axis)", low=2, high=MAX_GRID))
         set_(self, "observe_target", boolean(self.observe_target, "observe_target"))
-        if self.overlap_polish is not None:
-            set_(self, "overlap_polish", number(self.overlap_polish, "overlap_polish", low=0.0, low_open=True,
-                                                high=1.0, unit="action units"))
-            if self.residual_space != "joint":
-                raise ValueError("overlap_polish acts on joint-rate actions: it needs residual_space='joint'; got "
-                                 f"residual_space={self.residual_space!r}")
 
 
 __all__ = ["ViewTrackingConfig", "TASKS", "TEST_ONLY", "MAX_GRID"]

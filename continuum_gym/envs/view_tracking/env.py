@@ -9,12 +9,14 @@ endoscope's, the built-in IK's, the da Vinci's, the frustum's, the step paramete
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from continuum_gym.envs.core import Built, RowFunctions
 from continuum_gym.envs.front_ends import env_docstring, front_ends
+from continuum_gym.envs.helpers import register_helper
 from continuum_gym.envs.tasks import TaskContext
 from continuum_gym.envs.view_tracking.config import ViewTrackingConfig
 from continuum_gym.envs.view_tracking.kernel import (
@@ -51,43 +53,38 @@ def build(config: ViewTrackingConfig) -> Built:
         control_dt=config.control_dt, has_base=has_base, residual_scale=config.residual_scale if has_base else 1.0,
         target_space=config.residual_space == "target", target_scale=TARGET_SHIFT_SCALE, action_scale=ACTION_SCALE,
         rate_limit=rate_limits, weights=np.array([config.reward_weights[key] for key in REWARD_TERMS]))
-    layers: tuple = () if config.overlap_polish is None else (PolishLayer,)
     return Built(model=(robot.kernel_args(), controller.params, davinci.kernel_args(), frustum.kernel_args()),
                  params=params, action_dim=ACTION_DIM, obs_dim=OBS_DIM + (TARGET_OBS_DIM if config.observe_target else 0),
                  command=ACTION_DIM, context=TaskContext(robot, config.control_dt, grid=config.grid),
                  parts={"controller": controller, "davinci": davinci, "frustum": frustum, "rate_limits": rate_limits,
                         "residual_space": config.residual_space, "grid": config.grid,
-                        "observe_target": config.observe_target, "overlap_polish": config.overlap_polish},
-                 layers=layers)
+                        "observe_target": config.observe_target})
 
 
-class PolishLayer:
-    """The ``overlap_polish`` lookahead on the OR (``polish.py``), applied to the actions before the step."""
+def overlap_polish(config: ViewTrackingConfig) -> Callable[..., np.ndarray]:
+    """The helper ``overlap_polish``: a one-step lookahead on the overlap ratio (``polish.py``) for ``config``'s
+    rows, of largest step ``POLISH_STEP`` action units. It reads the observation and the nominal model only."""
+    from continuum_gym.envs.view_tracking.polish import POLISH_STEP, polish_actions
+    from continuum_gym.geometry.frustum import Frustum
 
-    def __init__(self, core: Any) -> None:
-        lower, upper = core.robot.joint_limits
-        frustum = core.frustum
-        self.core = core
-        # what the lookahead reads besides the observation and the actions, and its output (``polish``)
-        self.model = (core.control_dt, core._params.residual_scale * ACTION_SCALE, ACTION_SCALE, lower, upper,
-                      core.robot.kernel_args(), core.davinci.Le,
-                      np.array([frustum.tan_half, frustum.near, frustum.far]))
-        self.polished = np.empty((core.num_envs, ACTION_DIM))
+    if config.residual_space != "joint":
+        raise ValueError("the helper overlap_polish acts on joint-rate actions: it needs residual_space='joint'; got "
+                         f"residual_space={config.residual_space!r}")
+    lower, upper = config.robot.joint_limits
+    frustum = Frustum()
+    scale = config.residual_scale if config.base_controller is not None else 1.0
+    model = (config.control_dt, scale * ACTION_SCALE, ACTION_SCALE, lower, upper, config.robot.kernel_args(),
+             config.davinci.Le, np.array([frustum.tan_half, frustum.near, frustum.far]))
 
-    def reset_rows(self, rows: np.ndarray) -> None:
-        pass
+    def polish(obs: np.ndarray, actions: np.ndarray, active: np.ndarray) -> np.ndarray:
+        out = np.empty_like(actions)
+        polish_actions(obs, actions, active, POLISH_STEP, *model, out)
+        return out
 
-    def actions(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, None]:
-        from continuum_gym.envs.view_tracking.polish import polish_actions
+    return polish
 
-        if self.core.overlap_polish is None:  # switched off on this core
-            return actions, None
-        polish_actions(self.core.obs, np.asarray(actions, dtype=np.float64), np.asarray(active),
-                       self.core.overlap_polish, *self.model, self.polished)
-        return self.polished.astype(np.asarray(actions).dtype), None
 
-    def after_step(self, actions: np.ndarray, memo: None) -> None:
-        pass
+register_helper(SPEC.env_id, "overlap_polish", overlap_polish)
 
 
 def controller_observation(core: Any, row: int) -> dict:

@@ -1,8 +1,8 @@
-"""ViewTracking's optional overlap polish (``overlap_polish``): a one-step lookahead on the overlap ratio.
+"""ViewTracking's helper ``overlap_polish`` (``envs/helpers.py``): a one-step lookahead on the overlap ratio.
 
 The learned residuals settle 0.01-0.02 below an OR they could hold on many targets (experiments/notebook.md,
 Campaigns 6-7). The polish moves each row's action along the gradient of the OR predicted for the next
-configuration, by the step (of ``POLISH_FRACTIONS`` times ``overlap_polish``, in action units) that maximises that
+configuration, by the step (of ``POLISH_FRACTIONS`` times ``POLISH_STEP``, in action units) that maximises that
 predicted OR, where it beats the action as given, and only while the observed OR is at least ``POLISH_MIN_OR``
 (far from the target a greedy climb settles in the wrong local maximum). It reads the observation and the
 controller's nominal model only, as the base controller does: the configuration (normalised joints), the target
@@ -23,7 +23,9 @@ from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.endoscope import endoscope_kinematics, make_endoscope_workspace
 from continuum_gym.robots.rotations import rotation_exp
 
-#: Candidate steps, as fractions of ``overlap_polish`` (the largest step, action units).
+#: The largest step (action units): 0.05, the value the shipped residuals were measured with (experiments/README.md).
+POLISH_STEP = 0.05
+#: Candidate steps, as fractions of ``POLISH_STEP``.
 POLISH_FRACTIONS = np.array([0.2, 0.4, 1.0])
 #: The polish acts only while the observed OR is at least this.
 POLISH_MIN_OR = 0.75
@@ -109,4 +111,4 @@ def polish_actions(obs, actions, active, largest, dt, rate, action_scale, lower,
                     out[i, k] = min(max(action[k] + step * grad[k], -1.0), 1.0)
 
 
-__all__ = ["POLISH_FRACTIONS", "POLISH_MIN_OR", "POLISH_H", "polish_actions", "observed_camera"]
+__all__ = ["POLISH_STEP", "POLISH_FRACTIONS", "POLISH_MIN_OR", "POLISH_H", "polish_actions", "observed_camera"]
