@@ -28,23 +28,19 @@ import shlex
 import shutil
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
 import yaml
 
-from continuum_gym.agents.evaluation_callback import history_until, make_eval_callback
+from continuum_gym.agents.build import algo_class, build
 from continuum_gym.agents.run_inputs import (
-    SCHEDULE_KEYS,
     check_budget,
     check_combination,
     check_hyperparams,
     load_hyperparams,
     output_directory,
-    schedule_initial,
     seed_number,
     whole_number,
 )
@@ -82,19 +78,7 @@ def resolve_hyperparams(algo: str, env_id: str, path: Path | str | None = None) 
     """``load_hyperparams`` checked against the algorithm (``validation.check_hyperparams``)."""
     block = load_hyperparams(algo, env_id, path)
     source = f"{Path(path).name if path else f'{algo}.yml'} [{env_id}]"
-    return check_hyperparams(block, _algo_class(algo), algo, source)
-
-
-def linear_schedule(value: float | str, name: str) -> float | Callable[[float], float]:
-    """rl-zoo's ``lin_<x>``: decay linearly from x to 0 over the run (SB3 passes the remaining fraction)."""
-    if not isinstance(value, str):
-        return value
-    if not value.startswith("lin_"):
-        raise ValueError(f"{name} must be a number or 'lin_<initial value>'; got {value!r}")
-    initial = schedule_initial(value, name)
-    from stable_baselines3.common.utils import LinearSchedule
-
-    return LinearSchedule(initial, 0.0, 1.0)
+    return check_hyperparams(block, algo_class(algo), algo, source)
 
 
 def validate(env_id: str, algo: str, base: str | None) -> str | None:
@@ -122,7 +106,7 @@ def check_steps(algo: str, env_id: str, base: str | None, steps: int | None,
     if steps is None and "n_timesteps" not in hp:
         return None
     source = f"{Path(hyperparams).name if hyperparams else f'{algo}.yml'} [{env_id}]"
-    return check_budget(_algo_class(algo), hp, steps if steps is not None else hp["n_timesteps"], base is not None,
+    return check_budget(algo_class(algo), hp, steps if steps is not None else hp["n_timesteps"], base is not None,
                         source, "--steps" if steps is not None else "n_timesteps")
 
 
@@ -131,12 +115,6 @@ def default_base(env_id: str) -> str | None:
     registered = registered_kwargs(env_id)
     return registered["base_controller"] if "base_controller" in registered else \
         benchmark_of(env_id).headline_baseline
-
-
-def _algo_class(algo):
-    from stable_baselines3 import PPO, SAC, TD3
-
-    return {"ppo": PPO, "sac": SAC, "td3": TD3}[algo]
 
 
 def _git_commit():
@@ -268,7 +246,7 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     total = whole_number("steps", steps) if steps is not None else hp["n_timesteps"]
     n = whole_number("n_envs", n_envs) if n_envs is not None else hp.get("n_envs", RUN_DEFAULTS["n_envs"])
     check_combination(algo, hp, n, source)
-    little = check_budget(_algo_class(algo), hp, total, base is not None, source,
+    little = check_budget(algo_class(algo), hp, total, base is not None, source,
                           "--steps" if steps is not None else "n_timesteps")
     from continuum_gym.envs.helpers import check_helpers
 
@@ -306,7 +284,7 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
         clean_temporary(run_dir / CHECKPOINTS)
         for stale in temporary_files(run_dir):
             stale.unlink()
-        model, venv, saver, callbacks = _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir,
+        model, venv, saver, callbacks = build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir,
                                                unit, report)
         config = {"env_id": env_id, "algo": algo, "base_controller": base, **({"helpers": helpers} if helpers else {}),
                   "seed": seed, "total_timesteps": total,
@@ -345,100 +323,6 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
         finally:
             venv.close()
     return run_dir
-
-
-def _build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit, report):
-    """Model (new or from ``unit``), wrapped env and callbacks [burn-in, checkpoints, evaluation]."""
-    from stable_baselines3.common.noise import NormalActionNoise
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from continuum_gym.agents.checkpoint import (
-        BURN_IN_ACTOR,
-        CHECKPOINTS,
-        NORMALIZER,
-        CheckpointCallback,
-        load_model,
-    )
-    from continuum_gym.agents.residual import (
-        ActorBurnIn,
-        actor_parameters,
-        zero_init_residual,
-    )
-
-    venv = VecMonitor(venv)
-    venv.seed(seed)
-    if run["normalize_reward"]:
-        # Returns of long episodes reach the hundreds; the critic learns scaled returns. Observations are
-        # already normalised by the environment, and the policy never needs these statistics at test time.
-        saved = unit.file(NORMALIZER) if unit is not None else None
-        venv = VecNormalize.load(str(saved), venv) if saved else VecNormalize(
-            venv, norm_obs=False, norm_reward=True, gamma=float(run.get("gamma", 0.99)))
-    cls = _algo_class(algo)
-    if unit is not None:
-        model = load_model(unit, cls, venv, device="cpu", tensorboard_log=str(run_dir / "tb"))
-        # SB3's load reseeds with the run's seed, which would replay step 0's task sequence: continue
-        # with a stream of its own, the same for every resume from this unit.
-        model.set_random_seed(int(np.random.SeedSequence([seed, unit.step]).generate_state(1)[0] % 2**31))
-        state = {} if unit.legacy else unit.state()
-    else:
-        algo_kwargs = {k: _algo_value(k, v) for k, v in run.items() if k in _algo_keys(cls)}
-        if algo == "td3" and run.get("action_noise_std"):
-            dim = venv.action_space.shape[0]
-            sigma = float(run["action_noise_std"]) * np.ones(dim)
-            algo_kwargs["action_noise"] = NormalActionNoise(np.zeros(dim), sigma)
-        model = cls(run.get("policy", "MlpPolicy"), venv, seed=seed, verbose=0, device="cpu",
-                    tensorboard_log=str(run_dir / "tb"), **algo_kwargs)
-        if base is not None:
-            zero_init_residual(model)
-        state = {}
-    history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
-        run_dir / "evaluations.npz", unit.step)
-    evaluator = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
-                                   int(run["n_eval_episodes"]), report, history=history,
-                                   helpers=run.get("helpers") or ())
-    if unit is not None:
-        evaluator.write()  # the curve as of the checkpoint: rows of the lost stretch go
-    burn_steps = int(run["burn_in_steps"]) if base is not None else 0
-    burn_in = None
-    if burn_steps > 0:
-        snapshot = None
-        if unit is not None and unit.file(BURN_IN_ACTOR):
-            snapshot = ActorBurnIn.load_snapshot(unit.file(BURN_IN_ACTOR))
-        elif unit is not None and unit.legacy:
-            snapshot = [p.detach().clone() for p in actor_parameters(model)]
-        burn_in = ActorBurnIn(burn_steps, snapshot=snapshot)
-    elapsed_before = float(state.get("elapsed_s", 0.0))
-    started = time.monotonic()
-
-    def extra_state() -> dict:
-        return {"algo": algo, "seed": seed, "total_timesteps": total, "elapsed_s": elapsed_before + time.monotonic()
-                - started, "evaluations": evaluator.records(), "burn_in_steps": burn_steps}
-
-    def extra_files() -> dict:
-        if burn_in is not None and model.num_timesteps <= burn_steps:
-            return {BURN_IN_ACTOR: burn_in.save_snapshot}
-        return {}
-
-    saver = CheckpointCallback(run_dir / CHECKPOINTS, int(run["checkpoint_freq"]), float(run["checkpoint_minutes"]),
-                               int(run["keep_checkpoints"]), state=extra_state, files=extra_files)
-    # Burn-in first: at a rollout start it restores the actor before the checkpoint is written.
-    callbacks = ([burn_in] if burn_in is not None else []) + [saver, evaluator]
-    return model, venv, saver, callbacks
-
-
-def _algo_value(key, value):
-    """A checked hyperparameter as the algorithm takes it (YAML has lists, SB3 wants a train_freq tuple)."""
-    if key in SCHEDULE_KEYS:
-        return linear_schedule(value, key)
-    if key == "train_freq" and isinstance(value, list):
-        return tuple(value)
-    return value
-
-
-def _algo_keys(cls) -> set:
-    from continuum_gym.agents.run_inputs import algorithm_parameters
-
-    return set(algorithm_parameters(cls)) - {"policy"}
 
 
 def _base_vec_env(venv):

@@ -216,7 +216,7 @@ def test_evaluate_puts_every_method_through_one_path(tmp_path):
 def test_linear_schedules_decay_to_zero_survive_pickling_and_reject_garbage():
     import pickle
 
-    from continuum_gym.agents.train import linear_schedule
+    from continuum_gym.agents.build import linear_schedule
 
     schedule = linear_schedule("lin_2.0e-4", "learning_rate")
     assert schedule(1.0) == pytest.approx(2e-4) and schedule(0.25) == pytest.approx(5e-5) and schedule(0.0) == 0.0

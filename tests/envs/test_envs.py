@@ -339,7 +339,7 @@ def test_visibility_guard_keeps_the_tip_in_view_and_says_so(direction):
 
 
 def test_guard_gamma_rate_keeps_the_largest_feasible_share_of_the_residual():
-    from continuum_gym.envs.occlusion.kernel import guard_gamma_rate, view_fraction_at
+    from continuum_gym.envs.occlusion.guard import guard_gamma_rate, view_fraction_at
 
     core = OcclusionAvoidanceEnv(task="hold").core
     prm = core.controller.params.cone
@@ -595,7 +595,7 @@ def test_actions_of_any_layout_step_the_same_compiled_kernel(env_id):
 def test_the_guard_limits_only_the_residuals_rotation_as_documented():
     """Issue 54, item 5: what the guard guarantees is stated exactly. A joint residual that walks the tip out of
     the view, with no endoscope residual, is not stopped (the guard never acts), as the docstring says."""
-    from continuum_gym.envs.occlusion.kernel import view_fraction_at
+    from continuum_gym.envs.occlusion.guard import view_fraction_at
 
     doc = OcclusionAvoidanceEnv.__doc__
     assert "limits **only the\n    residual's endoscope rotation**" in doc and "nor the joint residual" in doc

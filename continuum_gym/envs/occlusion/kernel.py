@@ -37,9 +37,10 @@ from continuum_gym.envs.common_kernels import (
     desired_point,
     desired_rotation,
 )
-from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, measure, play, tip_noise
+from continuum_gym.envs.mismatch_kernels import measure, tip_noise
 from continuum_gym.envs.model_error import MISMATCH_TIP_EXACT
 from continuum_gym.envs.occlusion.controller import occlusion_slot_rates
+from continuum_gym.envs.occlusion.guard import endoscope_rate, guard_on, view_fraction_at
 from continuum_gym.envs.occlusion.outputs import (
     OBS,
     OBSERVATION,
@@ -50,9 +51,8 @@ from continuum_gym.envs.occlusion.outputs import (
     Flag,
     Metric,
 )
-from continuum_gym.envs.occlusion.plant import make_mismatch_work, seen_tip, true_model
+from continuum_gym.envs.occlusion.plant import make_mismatch_work, plant_substep, seen_tip, true_model
 from continuum_gym.envs.rows import by_plant
-from continuum_gym.geometry.lens_cone import to_lens
 from continuum_gym.geometry.occlusion import voi_of_configuration
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.robots.linalg import twist_gram_solve
@@ -67,8 +67,6 @@ REWARD_TERMS = ("voi", "tip_position", "tip_orientation", "visibility", "action"
 N_TERMS_REWARD = len(REWARD_TERMS)
 # Failure: the tip is lost.
 MAX_TIP_ERROR = 0.01  # m
-# Share of the residual kept by the visibility guard, resolved to 2^-20.
-GUARD_BISECTIONS = 20
 
 #: Per-row state of the batch: configurations (N, dof), endoscope rotations (N,) in rad, control steps (N,).
 OcclusionState = namedtuple("OcclusionState", ["q", "gamma", "steps"])
@@ -141,33 +139,6 @@ def project_nullspace(J, r, work, out):
         for a in range(6):
             acc += J[a, k] * B[a, 0]
         out[k] = r[k] - acc
-
-
-@kernel(inline="always")
-def view_fraction_at(p, gamma, cone):
-    """Angle of point p (m, {w}) from the lens axis at endoscope rotation gamma, in half-angles."""
-    xl, yl, zl = to_lens(p[0], p[1], p[2], gamma, cone.d_o, cone.alpha, cone.model)
-    return math.atan2(math.sqrt(xl * xl + yl * yl), zl) / cone.beta
-
-
-@kernel(borrows=True)
-def guard_gamma_rate(p, gamma, base_rate, residual_rate, dt, bound, cone):
-    """Endoscope rate with the residual's share scaled back so the tip p stays within ``bound`` half-angles.
-
-    The baseline's own rate is never changed: the residual is cut only where it would carry the tip
-    beyond max(bound, where the baseline alone leaves it). Returns (rate, guarded).
-    """
-    limit = max(bound, view_fraction_at(p, gamma + base_rate * dt, cone))
-    if view_fraction_at(p, gamma + (base_rate + residual_rate) * dt, cone) <= limit:
-        return base_rate + residual_rate, False
-    low, high = 0.0, 1.0  # share of the residual: low is feasible, high is not
-    for _ in range(GUARD_BISECTIONS):
-        mid = 0.5 * (low + high)
-        if view_fraction_at(p, gamma + (base_rate + mid * residual_rate) * dt, cone) <= limit:
-            low = mid
-        else:
-            high = mid
-    return base_rate + low * residual_rate, True
 
 
 @kernel(inline="always")
@@ -411,25 +382,6 @@ def joint_command(project, tip_J, residual, work, qdot, projected, rate_limit, c
 
 
 @kernel(inline="always")
-def guard_on(env, gamma_residual):
-    """Whether the visibility guard checks this step's endoscope rate."""
-    return env.visibility_guard > 0.0 and gamma_residual != 0.0
-
-
-@kernel(inline="always")
-def endoscope_rate(qg, gamma, gd, gamma_residual, dt, robot, prm, env, ws, tip_p, tip_R, tip_J):
-    """The endoscope's rate: baseline + residual, guarded at the joints qg (where ``guard_on``), clipped to the
-    rate limit. Returns (rate, guarded, clipped)."""
-    if guard_on(env, gamma_residual):
-        tip_kernel(qg, robot, ws, tip_p, tip_R, tip_J)
-        g_rate, guarded = guard_gamma_rate(tip_p, gamma, gd, gamma_residual, dt, env.visibility_guard, prm.cone)
-    else:
-        g_rate, guarded = gd + gamma_residual, False
-    g_rate, clipped = clamp(g_rate, -env.gamma_rate_limit, env.gamma_rate_limit)
-    return g_rate, guarded, clipped
-
-
-@kernel(inline="always")
 def finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
                          base_frozen, base_saturated, guarded):
     """Row i's reward terms, reward and flags after its observation."""
@@ -530,29 +482,6 @@ def step_row(i, state, actions, tasks, model, params, custom, work, out, plant):
     observe(i, state, tasks, robot, prm, env, custom, sw, out, plant, mw, true_robot, true_cone)
     finish_occlusion_row(i, state, tasks, env, out, action_sq, dof, clamped, rate_saturated, gamma_saturated,
                          base_frozen, base_saturated, guarded)
-
-
-@kernel(inline="always")
-def plant_substep(i, q, G, g_rate, substeps, dt, lower, upper, me, mw, clamped):
-    """The true robot's substep under the command ``mw.u`` (joints) and ``g_rate`` (endoscope): the command waits
-    ``delay_steps``, the actuators follow it with their lag within the position limits, each bending angle
-    follows its actuator through the backlash. Returns the clamped joint bits."""
-    u = mw.u
-    dof = q.shape[0]
-    u[dof] = g_rate
-    delay_command(me, i, u, substeps)
-    lag_rates(me, i, u, dt)
-    qa = me.q_act[i]
-    rate = me.rate[i]
-    backlash = me.backlash[i]
-    for k in range(dof):
-        qa[k], hit = clamp(qa[k] + rate[k] * dt, lower[k], upper[k])
-        if hit:
-            clamped |= 1 << k
-    for k in range(dof):
-        q[k] = play(q[k], qa[k], backlash) if (k % 2 == 0 and k < dof - 1) else qa[k]
-    G[i] = wrap_angle(G[i] + rate[dof] * dt)
-    return clamped
 
 
 __all__ = ["make_work", "observe_row", "step_row", "REWARD_TERMS", "Metric", "Flag", "BaseInfo", "OBSERVATION",

@@ -25,6 +25,9 @@ from collections import namedtuple
 
 import numpy as np
 
+from continuum_gym.baselines.occlusion_kernels import wrap_angle
+from continuum_gym.envs.common_kernels import clamp
+from continuum_gym.envs.mismatch_kernels import delay_command, lag_rates, play
 from continuum_gym.envs.model_error import MISMATCH_CALIB_EXACT
 from continuum_gym.geometry.lens_cone import ConeKernelArgs, lens_to_world_direction, to_lens
 from continuum_gym.robots.compiled import kernel
@@ -86,4 +89,27 @@ def seen_tip(i, gamma, cone, true_cone, me, mw):
             Rs[0, b], Rs[1, b], Rs[2, b] = _turn_about_lens(R[0, b], R[1, b], R[2, b], cg, sg, ca, sa)
 
 
-__all__ = ["MismatchWork", "make_mismatch_work", "true_model", "seen_tip"]
+@kernel(inline="always")
+def plant_substep(i, q, G, g_rate, substeps, dt, lower, upper, me, mw, clamped):
+    """The true robot's substep under the command ``mw.u`` (joints) and ``g_rate`` (endoscope): the command waits
+    ``delay_steps``, the actuators follow it with their lag within the position limits, each bending angle
+    follows its actuator through the backlash. Returns the clamped joint bits."""
+    u = mw.u
+    dof = q.shape[0]
+    u[dof] = g_rate
+    delay_command(me, i, u, substeps)
+    lag_rates(me, i, u, dt)
+    qa = me.q_act[i]
+    rate = me.rate[i]
+    backlash = me.backlash[i]
+    for k in range(dof):
+        qa[k], hit = clamp(qa[k] + rate[k] * dt, lower[k], upper[k])
+        if hit:
+            clamped |= 1 << k
+    for k in range(dof):
+        q[k] = play(q[k], qa[k], backlash) if (k % 2 == 0 and k < dof - 1) else qa[k]
+    G[i] = wrap_angle(G[i] + rate[dof] * dt)
+    return clamped
+
+
+__all__ = ["MismatchWork", "make_mismatch_work", "true_model", "seen_tip", "plant_substep"]
