@@ -152,3 +152,28 @@ def test_a_run_trained_with_the_old_option_loads_as_residual_arc_plan(tmp_path):
     plain = {**old, "env_config": {"base_controller": "projected_gradient", "residual_scale": 2.0}}
     plain.pop("env_kwargs")
     assert read_run_config(run, plain)["env_config"]["base_controller"] == "projected_gradient"
+
+
+def test_recorded_holds_are_planned_and_moving_recordings_are_not():
+    """A recorded ``TipTrajectory`` whose samples all sit at its start's tip is a hold (issue 55: such rows stayed
+    unplanned); the base executes hold_arc_plan's trajectory there. A recording that moves keeps the base."""
+    from continuum_gym.baselines.occlusion import OcclusionLimits
+    from continuum_gym.envs.occlusion.tasks import hold_start_pool
+    from continuum_gym.envs.trajectories import TipTrajectory
+
+    limits = OcclusionLimits()
+    starts = np.asarray(hold_start_pool("validation", float(limits.max_bend), tuple(limits.insertion)))[:2]
+    core = OcclusionCore(3, task="hold", base_controller="arc_plan", **KW)
+    holds = []
+    for q0 in starts:
+        tip, _ = core.robot.forward_kinematics(q0)
+        holds.append(TipTrajectory(times=np.array([0.0, 1.5]), positions=np.stack([tip, tip]), start_q=q0))
+    tip, _ = core.robot.forward_kinematics(starts[0])
+    moving = TipTrajectory(times=np.array([0.0, 1.5]), positions=np.stack([tip, tip + [0.002, 0.0, 0.0]]),
+                           start_q=starts[0])
+    recorded = OcclusionCore(3, task=[*holds, moving], base_controller="arc_plan", **KW)
+    voi, _ = _run(recorded, np.arange(3), steps=150)
+    np.testing.assert_array_equal(recorded.layers[0].on, [True, True, False])
+    planned = [hold_arc_plan(recorded.robot, q0, recorded.limits, visibility=GUARD, cone=recorded.cone, steps=150)
+               for q0 in starts]
+    np.testing.assert_allclose(voi[:, :2].mean(axis=0), [p["mean_voi_plan"] for p in planned], atol=2e-3)

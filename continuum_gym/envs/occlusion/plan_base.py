@@ -1,7 +1,7 @@
 """OcclusionAvoidance's ``arc_plan`` option: on hold tasks the residual's base tracks a planned trajectory.
 
 On a row whose task holds a static tip pose (the ``hold`` family, or any task with a constant target equal to
-its start's tip pose), the env plans when the episode starts: :func:`~continuum_gym.baselines.arc_plan.hold_arc_plan`
+its start's tip pose: a recorded ``TipTrajectory`` whose samples all sit at the start's tip, for one), the env plans when the episode starts: :func:`~continuum_gym.baselines.arc_plan.hold_arc_plan`
 from the start configuration and endoscope rotation (a trajectory along the self-motion arc of the held pose
 towards a low-VOI point, every joint and the endoscope within its rate limit, the tip kept in view within the
 env's visibility guard). At every control step the base command of that row is the rate that reaches the plan's
@@ -47,6 +47,22 @@ def _wrap(x: np.ndarray) -> np.ndarray:
     return (x + math.pi) % (2 * math.pi) - math.pi
 
 
+def static_target(tasks: Any, r: int) -> np.ndarray | None:
+    """Row ``r``'s target position if its task holds one tip pose for the whole episode, else None.
+
+    A sine task holds when no term moves (amplitude or frequency zero): its centre. A recorded trajectory
+    (``TipTrajectory``, spline knots) holds when every knot is at the first one's position and orientation
+    with zero slopes: its first knot.
+    """
+    n = int(tasks.n_knots[r])
+    if n == 0:
+        return None if np.any(tasks.amp[r] * tasks.omega[r][:, None] != 0.0) else tasks.centre[r]
+    x, r_knots = tasks.knot_x[r, :n], tasks.knot_r[r, :n]
+    still = (np.all(np.abs(x - x[0]) <= HOLD_TOLERANCE_M) and np.all(tasks.knot_m[r, :n] == 0.0)
+             and np.all(r_knots == r_knots[0]) and np.all(tasks.knot_rm[r, :n] == 0.0))
+    return x[0] if still else None
+
+
 class ArcPlanBase:
     """The per-row plans of one ``OcclusionCore`` and the residual that makes its base follow them."""
 
@@ -68,11 +84,12 @@ class ArcPlanBase:
         tasks = core.tasks
         self.on[rows] = False
         for r in rows:
-            if tasks.n_knots[r] != 0 or np.any(tasks.amp[r] * tasks.omega[r][:, None] != 0.0):
+            target = static_target(tasks, r)
+            if target is None:
                 continue
             q0 = self._joints()[r]
             tip, _ = core.robot.forward_kinematics(q0)
-            if np.max(np.abs(tip - tasks.centre[r])) > HOLD_TOLERANCE_M:
+            if np.max(np.abs(tip - target)) > HOLD_TOLERANCE_M:
                 continue
             plan = self._plan(q0, float(core.gamma[r]), int(tasks.duration[r]))
             if plan is None:
