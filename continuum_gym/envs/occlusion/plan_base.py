@@ -2,7 +2,8 @@
 
 On a row whose task holds a static tip pose (the ``hold`` family, or any task with a constant target equal to
 its start's tip pose: a recorded ``TipTrajectory`` whose samples all sit at the start's tip, for one), the base
-plans when the episode starts: :func:`~continuum_gym.baselines.arc_plan.hold_arc_plan` from the start configuration and endoscope rotation (a trajectory along the self-motion arc of the held pose
+plans when the episode starts: :func:`~continuum_gym.baselines.arc_plan.hold_arc_plan` from the start
+configuration and endoscope rotation (a trajectory along the self-motion arc of the held pose
 towards a low-VOI point, every joint and the endoscope within its rate limit, the tip kept in view within the
 env's visibility guard). At every control step the base command of that row is the rate that reaches the plan's
 next point in one step; the projected gradient (recomputed at every substep) stays underneath it, so the
