@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -35,7 +37,8 @@ def linear_schedule(value: float | str, name: str) -> float | Callable[[float], 
     return LinearSchedule(initial, 0.0, 1.0)
 
 
-def build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit, report):
+def build(env_id: str, algo: str, base: str | None, seed: int, total: int, run: dict, env_kwargs: dict, venv: Any,
+          run_dir: Path, unit: Any, report: Callable[[int, float], None] | None) -> tuple[Any, Any, Any, list]:
     """Model (new or from ``unit``), wrapped env and callbacks [burn-in, checkpoints, evaluation]."""
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
@@ -81,9 +84,10 @@ def build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit,
         state = {}
     history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
         run_dir / "evaluations.npz", unit.step)
-    evaluator = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
-                                   int(run["n_eval_episodes"]), report, history=history,
-                                   helpers=run.get("helpers") or ())
+    # its class is local to make_eval_callback (write(), records())
+    evaluator: Any = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
+                                        int(run["n_eval_episodes"]), report, history=history,
+                                        helpers=run.get("helpers") or ())
     if unit is not None:
         evaluator.write()  # the curve as of the checkpoint: rows of the lost stretch go
     burn_steps = int(run["burn_in_steps"]) if base is not None else 0
@@ -114,7 +118,7 @@ def build(env_id, algo, base, seed, total, run, env_kwargs, venv, run_dir, unit,
     return model, venv, saver, callbacks
 
 
-def algo_value(key, value):
+def algo_value(key: str, value: Any) -> Any:
     """A checked hyperparameter as the algorithm takes it (YAML has lists, SB3 wants a train_freq tuple)."""
     if key in SCHEDULE_KEYS:
         return linear_schedule(value, key)
@@ -123,7 +127,7 @@ def algo_value(key, value):
     return value
 
 
-def algo_keys(cls) -> set:
+def algo_keys(cls: type) -> set:
     from continuum_gym.agents.run_inputs import algorithm_parameters
 
     return set(algorithm_parameters(cls)) - {"policy"}

@@ -122,7 +122,8 @@ class OcclusionConfig(EnvConfig):
         assert self.cone is not None  # set just above when it was not given (mypy does not see object.__setattr__)
         set_(self, "lens_model", self.cone.lens_model)
         if self.residual_scale is None:
-            set_(self, "residual_scale", self.base_residual_scales.get(self.base_controller, 0.3))
+            own = self.base_residual_scales.get(self.base_controller) if isinstance(self.base_controller, str) else None
+            set_(self, "residual_scale", 0.3 if own is None else own)  # a bad base is named by check_common
         check_common(self)
         check_model_error(self, "occlusion", self.robot.n_segments)
         choice(self.residual_space, self.residual_spaces, "residual_space")
