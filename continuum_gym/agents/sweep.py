@@ -125,7 +125,7 @@ def run_trial(config: dict[str, Any], env_id: str, algo: str, base: str | None, 
     block.update(overrides)
     hyperparams = trial_dir / "hyperparams.yml"
     write_text_atomic(hyperparams, yaml.safe_dump({env_id: block}, sort_keys=False))
-    run_dir = trial_dir / run_name(env_id, algo, base, int(config["seed"]))
+    run_dir = trial_dir / run_name(env_id, algo, base, int(config["seed"]), (block.get("env_kwargs") or {}).get("obs_mode"))
     if (run_dir / "model.zip").exists():
         return run_dir  # finished before an interruption
     # A retried trial continues from its newest intact checkpoint, or starts again if it had none.
