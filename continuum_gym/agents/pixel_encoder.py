@@ -32,6 +32,8 @@ from continuum_gym.validation import choice, integer
 __all__ = ["PixelEncoder", "CNNS"]
 
 CNNS = ("nature", "small")
+#: The smallest image side each CNN's strides leave a feature map for (pixels).
+MIN_SIDES = {"nature": 36, "small": 20}
 _IMAGE_KEYS = ("rgb", "depth", "segmentation")
 
 
@@ -39,9 +41,17 @@ def _is_image_key(key: str) -> bool:
     return any(key == name or key.endswith("_" + name) for name in _IMAGE_KEYS)
 
 
-def _channels_first(space: gym.spaces.Box) -> bool:
+def _shape(space: gym.Space) -> tuple[int, ...]:
+    shape = space.shape
+    if not isinstance(space, gym.spaces.Box) or shape is None:
+        raise ValueError(f"every entry of a pixel observation must be a Box; got {space}")
+    return tuple(shape)
+
+
+def _channels_first(space: gym.Space) -> bool:
     """SB3's ``VecTransposeImage`` moved an rgb image's channels first; depth and ids keep them last."""
-    return space.shape[0] < space.shape[-1]
+    shape = _shape(space)
+    return shape[0] < shape[-1]
 
 
 def _layers(cnn: str, channels: int) -> nn.Sequential:
@@ -71,7 +81,7 @@ class PixelEncoder(BaseFeaturesExtractor):
         self.image_keys = sorted(k for k in observation_space.spaces if _is_image_key(k))
         if not self.image_keys:
             raise ValueError(f"observation_space has no image entry (keys {sorted(observation_space.spaces)})")
-        state_dim = int(np.prod(observation_space["state"].shape))
+        state_dim = int(np.prod(_shape(observation_space["state"])))
         super().__init__(observation_space, features_dim + state_dim)
         self.augment = bool(augment)
         self.shift = integer(shift, "shift", low=0)
@@ -79,15 +89,19 @@ class PixelEncoder(BaseFeaturesExtractor):
         self._scale = {}
         channels = 0
         for key in self.image_keys:
-            space = observation_space[key]
-            channels += int(space.shape[0] if self._first[key] else space.shape[-1])
-            high = float(np.max(space.high))
+            shape = _shape(observation_space[key])
+            channels += int(shape[0] if self._first[key] else shape[-1])
+            high = float(np.max(observation_space[key].high))  # type: ignore[attr-defined]  # a Box (_shape)
             self._scale[key] = 1.0 if key.endswith("rgb") else 1.0 / max(high, 1e-9)  # rgb: SB3 scaled it
-        shape = observation_space[self.image_keys[0]].shape
+        shape = _shape(observation_space[self.image_keys[0]])
         height, width = (shape[1], shape[2]) if self._first[self.image_keys[0]] else (shape[0], shape[1])
         self.cnn = _layers(cnn, channels)
-        with torch.no_grad():
-            flat = int(self.cnn(torch.zeros(1, channels, height, width)).shape[1])
+        try:
+            with torch.no_grad():
+                flat = int(self.cnn(torch.zeros(1, channels, height, width)).shape[1])
+        except RuntimeError:
+            raise ValueError(f"cnn={cnn!r} needs larger images than {height}x{width} (image_size: at least "
+                             f"{MIN_SIDES[cnn]} pixels a side)") from None
         self.head = nn.Sequential(nn.Linear(flat, features_dim), nn.ReLU())
 
     def images(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -48,6 +48,9 @@ MODE_MODALITIES: dict[str, tuple[str, ...]] = {
 #: no longer fits a training rollout in memory.
 MIN_IMAGE_SIDE, MAX_IMAGE_SIDE = 16, 512
 DEFAULT_IMAGE_SIZE = 64
+#: Bound of the ``state`` entry's values (SI units): far beyond any joint, rotation or rate of the robots, finite
+#: so that the checkers accept the space; values beyond it (a diverging plug-in) are clipped to it.
+STATE_LIMIT = 1e6
 #: The keywords that choose the observation (fields of every ``EnvConfig``); they define how a policy sees,
 #: so a trained policy's env is rebuilt with them (``evaluation.evaluate.policy_env_kwargs``).
 OBSERVATION_KEYWORDS = ("obs_mode", "image_size")
@@ -131,7 +134,8 @@ def pixel_spec(env_id: str) -> PixelSpec:
                          f"{sorted(PIXEL_SPECS)}")
     if isinstance(entry, str):
         entry = PIXEL_SPECS[env_id] = load_object(entry)
-    return entry  # type: ignore[return-value]  # a PixelSpec once loaded
+    assert isinstance(entry, PixelSpec), f"{env_id}'s pixel spec is not a PixelSpec"
+    return entry
 
 
 def observation_space(spec: PixelSpec, obs_mode: str, height: int, width: int, state_dim: int,
@@ -148,7 +152,7 @@ def observation_space(spec: PixelSpec, obs_mode: str, height: int, width: int, s
                 entries[prefix + "depth"] = spaces.Box(0.0, spec.far, (height, width, 1), np.float32)
             else:
                 entries[prefix + "segmentation"] = spaces.Box(0, max_id, (height, width, 1), np.uint8)
-    entries["state"] = spaces.Box(-np.inf, np.inf, (state_dim,), np.float32)
+    entries["state"] = spaces.Box(-STATE_LIMIT, STATE_LIMIT, (state_dim,), np.float32)
     return spaces.Dict(entries)
 
 
@@ -193,7 +197,7 @@ class PixelObserver:
         n = self.core.num_envs
         whole = rows is None or (len(rows) == n and np.array_equal(np.asarray(rows), np.arange(n)))
         index = np.arange(n) if whole else np.asarray(rows, dtype=np.int64)
-        self.state[:] = self.spec.state(self.core)
+        np.clip(self.spec.state(self.core), -STATE_LIMIT, STATE_LIMIT, out=self.state, casting="same_kind")
         if len(index) == 0:
             return
         scene = self.spec.scene(self.core, index, self.height, self.width)
@@ -269,16 +273,16 @@ def stack_rows(observations: list[dict[str, np.ndarray]]) -> dict[str, np.ndarra
 
 
 # ---------------------------------------------------------------------- the true robot (model error)
-def mismatch_groups(core: Any, rows: np.ndarray) -> list[tuple[np.ndarray, np.ndarray | None, np.ndarray | None]]:
-    """The rows grouped by their true robot: [(rows, length scales or None, calibration or None)].
+def mismatch_groups(core: Any, rows: np.ndarray) -> list[tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]]:
+    """The rows grouped by their true robot: [(positions in ``rows``, (length scales, calibration) or None)].
 
-    Without a model error there is one group of nominal rows (None, None). Under one, rows whose segment
+    Without a model error there is one group of nominal rows (None). Under one, rows whose segment
     length scales and mounting calibration (``MismatchState.arrays``) are equal share a group, so each group's
     scene is one compiled call.
     """
     mismatch = getattr(core, "_mismatch", None)
     if mismatch is None:
-        return [(rows, None, None)]
+        return [(np.arange(len(rows)), None)]
     scale, calib = mismatch.arrays.scale[rows], mismatch.arrays.calib[rows]
     keys = np.concatenate([scale, calib], axis=1)
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
@@ -288,7 +292,7 @@ def mismatch_groups(core: Any, rows: np.ndarray) -> list[tuple[np.ndarray, np.nd
         members = np.flatnonzero(inverse == g)
         s, c = scale[members[0]], calib[members[0]]
         nominal = bool(np.all(s == 1.0) and np.all(c == 0.0))
-        groups.append((members, None if nominal else s, None if nominal else c))
+        groups.append((members, None if nominal else (s, c)))
     return groups
 
 

@@ -88,7 +88,7 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     clipped = np.zeros(n)
     action_dim = core.single_action_space.shape[0]
     while active.any():
-        observation = observer.observations(copy=False) if images else core.obs.astype(np.float32)  # type: ignore[union-attr]
+        observation = observer.observations(copy=False) if images else core.obs.astype(np.float32)
         actions = predictor.act(observation, action_dim)
         outside = np.abs(actions) > 1.0
         clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]

@@ -167,6 +167,7 @@ def table_metrics(spec: EnvSpec, results: dict) -> tuple[Metric, ...]:
 
 def fmt(spec: EnvSpec, name: str, value: float) -> str:
     """A metric value as the tables show it (lengths in mm, percentages with one decimal)."""
+    metric: Metric | None
     try:
         metric = spec.metric(name)
     except KeyError:

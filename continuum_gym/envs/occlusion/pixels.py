@@ -52,9 +52,10 @@ def scene(core: Any, rows: np.ndarray, height: int, width: int) -> Any:
     robot, cone = core.config.robot, core.config.cone
     q, gamma = np.ascontiguousarray(core.q[rows]), np.ascontiguousarray(core.gamma[rows])
     out = occlusion_scene(robot, cone, q, gamma, width=width, height=height, n_per_segment=N_PER_SEGMENT, far=FAR)
-    for members, scale, calib in mismatch_groups(core, rows):
-        if scale is None:
+    for members, error in mismatch_groups(core, rows):
+        if error is None:
             continue
+        scale, calib = error
         true_robot = dataclasses.replace(robot, lengths=tuple(np.asarray(robot.lengths) * scale))
         true_cone = LensCone(cone.d_o + calib[0], cone.alpha + calib[1], cone.beta, cone.lens_model)
         m, count = len(members), out.tubes.count

@@ -7,8 +7,8 @@ ends), ``controller`` (how it calls a registered controller), ``goal`` (the HER 
 first use, so importing the package registers the id without compiling anything.
 """
 
-from continuum_gym.envs.view_tracking.spec import SPEC
 from continuum_gym.envs.pixels import register_pixels
+from continuum_gym.envs.view_tracking.spec import SPEC
 from continuum_gym.plugins import lazy_exports
 
 _EXPORTS = {

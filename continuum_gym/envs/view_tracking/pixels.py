@@ -62,9 +62,10 @@ def scene(core: Any, rows: np.ndarray, height: int, width: int) -> Any:
     q, q_dv = np.ascontiguousarray(core.q[rows]), davinci_configurations(core, rows)
     out = view_tracking_scene(robot, davinci, _frustum(core), q, q_dv, width=width, height=height,
                               n_per_segment=N_PER_SEGMENT, far=FAR)
-    for members, scale, calib in mismatch_groups(core, rows):
-        if scale is None:
+    for members, error in mismatch_groups(core, rows):
+        if error is None:
             continue
+        scale, calib = error
         true_robot = type(robot)(L1=robot.L1 * scale[0], Lm=robot.Lm, L2=robot.L2 * scale[1], Lc=robot.Lc,
                                  Le=robot.Le)
         m, count = len(members), out.tubes.count
