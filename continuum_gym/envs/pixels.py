@@ -319,6 +319,22 @@ def with_rows(scene: Scene, members: np.ndarray, a: np.ndarray, b: np.ndarray, u
     return replace(scene, tubes=replace(tubes, a=A, b=B, u=U), views=views)
 
 
-__all__ = ["OBS_MODES", "MODE_MODALITIES", "OBSERVATION_KEYWORDS", "DEFAULT_IMAGE_SIZE", "check_obs_mode",
-           "check_image_size", "image_shape", "PixelSpec", "PIXEL_SPECS", "register_pixels", "pixel_spec",
-           "observation_space", "PixelObserver", "make_observer", "stack_rows", "mismatch_groups", "with_rows"]
+def cameras(env: Any, view: str = "endoscope") -> Any:
+    """Every row's camera of ``view`` at an env's current state: the public camera model (``camera.Cameras``).
+
+    ``intrinsics`` (N, 3, 3) in pixels, ``poses`` (N, 4, 4) world-from-camera (OpenCV axes: z the optical axis,
+    x image right, y image down), ``project(points)`` -> pixel coordinates (u, v) = (column, row), at the env's
+    ``image_size`` (docs/rendering.md, "Camera conventions"). ``env``: any front end (or a core), in any
+    ``obs_mode``; ``view``: ``"endoscope"``, or ViewTracking's ``"davinci"``.
+    """
+    inner = getattr(env, "unwrapped", env)
+    core = getattr(inner, "core", inner)
+    spec = pixel_spec(core.spec.env_id)
+    height, width = image_shape(check_image_size(getattr(core.config, "image_size", DEFAULT_IMAGE_SIZE)))
+    return spec.scene(core, np.arange(core.num_envs), height, width).view(view).cameras
+
+
+__all__ = ["OBS_MODES", "MODE_MODALITIES", "OBSERVATION_KEYWORDS", "DEFAULT_IMAGE_SIZE", "STATE_LIMIT",
+           "check_obs_mode", "check_image_size", "image_shape", "PixelSpec", "PIXEL_SPECS", "register_pixels",
+           "pixel_spec", "observation_space", "PixelObserver", "make_observer", "stack_rows", "mismatch_groups",
+           "with_rows", "cameras"]
