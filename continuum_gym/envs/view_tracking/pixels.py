@@ -83,7 +83,8 @@ def metrics(core: Any, rows: np.ndarray, scene: Any, frames: dict) -> dict[str, 
     """``view_centre_error_pct`` and ``view_centre_in_image`` of the rows' continuum endoscope images."""
     from continuum_gym.camera import view_centre_error
 
-    points = core.config.davinci.target_point(davinci_configurations(core, rows))
+    poses = scene.view("davinci").cameras.poses  # the target point is Le along the da Vinci camera's axis (eq 2)
+    points = poses[:, :3, 3] + core.config.davinci.Le * poses[:, :3, 2]
     error, in_image = view_centre_error(frames["endoscope"].cameras, points)
     return {"view_centre_error_pct": error, "view_centre_in_image": in_image}
 
