@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Issue 56's validation screens: two lanes of niced training runs, 300k steps each, seed 0, validation curve
-# (16 episodes every 50k steps) in each run's evaluations.npz. Usage: bash experiments/pixels/run_screens.sh OUT
+# Issue 56's validation screens: two lanes of niced training runs, seed 0, the validation curve (16 episodes
+# every 50k steps) in each run's evaluations.npz; compared at 200k steps (the machine was shared: a screen got
+# about a third of a core). Usage: bash experiments/pixels/run_screens.sh OUT
 set -euo pipefail
 out=${1:-$HOME/campaigns/pixels/screens}
 here=$(cd "$(dirname "$0")" && pwd)
@@ -9,11 +10,11 @@ lane() {
   for name in "$@"; do
     case $name in occ_*) env=ContinuumGym/OcclusionAvoidance-v0 ;; *) env=ContinuumGym/ViewTracking-v0 ;; esac
     /usr/bin/time -f "$name cpu_s=%U+%S wall_s=%e" nice -n 10 continuum-gym train --env "$env" \
-      --hyperparams "$here/screens/$name.yml" --steps 300000 --out "$out/$name" --no-progress --resume \
+      --hyperparams "$here/screens/$name.yml" --steps 200000 --out "$out/$name" --no-progress --resume \
       >>"$out/$name.log" 2>&1
   done
 }
 mkdir -p "$out"
-lane occ_small occ_small_shift vt_small_shift &
-lane occ_nature vt_small &
+lane ${LANE_A:-occ_small occ_small_shift} &
+lane ${LANE_B:-occ_nature vt_small} &
 wait

@@ -297,6 +297,19 @@ def test_sb3_multi_input_policy_and_the_pixel_encoder_learn_a_few_steps():
     default.learn(16)
 
 
+def test_cnn_policy_takes_one_image_through_gymnasiums_transform_observation():
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    def rgb_only():  # CnnPolicy wants one Box image: the rgb entry of obs_mode="rgb" (docs/tutorials/pixels.md)
+        env = make(OCC, "rgb", image_size=36)
+        return gym.wrappers.TransformObservation(env, lambda obs: obs["rgb"], env.observation_space["rgb"])
+
+    model = PPO("CnnPolicy", make_vec_env(rgb_only, n_envs=1), n_steps=8, batch_size=8, n_epochs=1, device="cpu")
+    assert model.observation_space.shape == (3, 36, 36)  # SB3 transposed it (VecTransposeImage)
+    model.learn(8)
+
+
 def test_pixel_encoder_stacks_every_image_and_keeps_the_state():
     import torch
 

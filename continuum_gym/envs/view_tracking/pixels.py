@@ -12,8 +12,8 @@ controller's command (6: m/s, rad/s)]. The target's pose is not in it: the goal 
 
 Pixel metric, in ``info`` of every image mode: ``view_centre_error_pct``, where the da Vinci view's centre
 (its target point) appears in the continuum endoscope's image, as its distance from the principal point in %
-of the image width (LapGym's SearchForPoint metric; ``camera.view_centre_error``), and
-``view_centre_in_image`` (bool).
+of the image width (LapGym's SearchForPoint metric; ``camera.view_centre_error``), capped at 100 % (a target
+behind the camera has no image), and ``view_centre_in_image`` (bool).
 
 Under a model error the image shows the true endoscope (segment lengths scaled, the camera turned by its
 mounting error at the tip): rows of one true endoscope share one compiled scene call.
@@ -32,6 +32,10 @@ from continuum_gym.envs.spec import EpisodeMetric, Metric
 N_PER_SEGMENT = 6
 #: Both cameras' far clip (m).
 FAR = 1.5
+#: The view-centre error is capped at one image width (%): a target at or behind the camera plane has no image
+#: (``camera.view_centre_error`` gives inf), and an episode's mean must stay a number; any error above ~71 % is
+#: outside the image anyway (``view_centre_in_image`` says which).
+MAX_CENTRE_ERROR_PCT = 100.0
 
 
 def state(core: Any) -> np.ndarray:
@@ -86,7 +90,7 @@ def metrics(core: Any, rows: np.ndarray, scene: Any, frames: dict) -> dict[str, 
     poses = scene.view("davinci").cameras.poses  # the target point is Le along the da Vinci camera's axis (eq 2)
     points = poses[:, :3, 3] + core.config.davinci.Le * poses[:, :3, 2]
     error, in_image = view_centre_error(frames["endoscope"].cameras, points)
-    return {"view_centre_error_pct": error, "view_centre_in_image": in_image}
+    return {"view_centre_error_pct": np.minimum(error, MAX_CENTRE_ERROR_PCT), "view_centre_in_image": in_image}
 
 
 def make_spec() -> PixelSpec:
