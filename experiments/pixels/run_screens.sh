@@ -15,6 +15,6 @@ lane() {
   done
 }
 mkdir -p "$out"
-lane ${LANE_A:-occ_small occ_small_shift} &
-lane ${LANE_B:-occ_nature vt_small} &
+lane ${LANE_A-occ_small occ_small_shift} &
+lane ${LANE_B-occ_nature vt_small} &
 wait

@@ -400,3 +400,14 @@ def test_a_dataset_of_images_records_and_recovers_its_env(tmp_path):
     assert episode.observations["rgb"].shape == (4, 16, 16, 3) and episode.observations["rgb"].dtype == np.uint8
     env = dataset.recover_environment()
     assert env.observation_space["rgb"].shape == (16, 16, 3)
+
+
+@pytest.mark.parametrize("env_id", [OCC, VIEW])
+def test_the_packaged_pixel_configuration_loads_by_name_and_checks(env_id):
+    from continuum_gym.agents.train import resolve_hyperparams
+
+    block = resolve_hyperparams("ppo", env_id, "ppo_pixels.yml")  # a packaged file by its bare name
+    assert block["policy"] == "MultiInputPolicy" and block["env_kwargs"]["obs_mode"] == "rgbd"
+    assert block["policy_kwargs"]["features_extractor_class"] == "continuum_gym.agents.pixel_encoder:PixelEncoder"
+    with pytest.raises(ValueError, match="no file"):
+        resolve_hyperparams("ppo", env_id, "no_such_pixels.yml")
