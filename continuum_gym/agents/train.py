@@ -284,6 +284,10 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
 
     threads = learner_threads()
     env_kwargs = dict(run["env_kwargs"] or {})
+    if env_kwargs.get("obs_mode", "state") != "state":  # image batches: no page faults per step (allocator.py)
+        from continuum_gym.agents.allocator import keep_large_blocks
+
+        threads["large_blocks_kept"] = keep_large_blocks()
     env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
     try:  # the environment checks its own keywords; still nothing written
         venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)

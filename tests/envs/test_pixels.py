@@ -411,3 +411,13 @@ def test_the_packaged_pixel_configuration_loads_by_name_and_checks(env_id):
     assert block["policy_kwargs"]["features_extractor_class"] == "continuum_gym.agents.pixel_encoder:PixelEncoder"
     with pytest.raises(ValueError, match="no file"):
         resolve_hyperparams("ppo", env_id, "no_such_pixels.yml")
+
+
+def test_the_trainer_keeps_large_blocks_in_its_heap_in_a_child_process():
+    import subprocess
+    import sys
+
+    code = ("from continuum_gym.agents.allocator import keep_large_blocks; import numpy as np; "
+            "assert keep_large_blocks(); a = np.ones(50_000_000 // 8); del a; print('ok')")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
