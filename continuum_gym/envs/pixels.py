@@ -334,7 +334,54 @@ def cameras(env: Any, view: str = "endoscope") -> Any:
     return spec.scene(core, np.arange(core.num_envs), height, width).view(view).cameras
 
 
+# ---------------------------------------------------------------------- render_mode="rgb_array" of the endoscope cameras
+#: Who draws ``render()``: the pybullet scene (every camera, overlays) or the batched renderer (endoscope cameras).
+RENDERERS = ("pybullet", "fast")
+#: ``render()``'s image side (pixels), the pybullet scenes' default.
+RENDER_SIZE = 128
+
+
+class FastRender:
+    """``render()`` of an endoscope camera by the batched renderer: the rgb of the rows' true state, 128x128."""
+
+    def __init__(self, core: Any, camera: str) -> None:
+        from continuum_gym.camera import Renderer
+
+        self.core, self.camera = core, camera
+        self.spec = pixel_spec(core.spec.env_id)
+        self.renderer = Renderer()
+
+    def images(self, rows: Any = None) -> np.ndarray:
+        """RGB images (len(rows), 128, 128, 3) uint8 of ``rows`` (None: all)."""
+        index = np.arange(self.core.num_envs) if rows is None else np.asarray(rows, dtype=np.int64).reshape(-1)
+        scene = self.spec.scene(self.core, index, RENDER_SIZE, RENDER_SIZE)
+        rgb = self.renderer.render(scene, self.camera, ("rgb",)).rgb
+        assert rgb is not None
+        return rgb
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "renderer": None}
+
+    def __setstate__(self, state: dict) -> None:
+        from continuum_gym.camera import Renderer
+
+        self.__dict__.update(state, renderer=Renderer())
+
+
+def fast_render(core: Any, renderer: Any, camera: str) -> FastRender | None:
+    """The batched renderer of ``render()`` for ``renderer="fast"`` (None for ``"pybullet"``), checked: it draws the
+    endoscope cameras (``"endoscope"``, ViewTracking's ``"davinci"``) only."""
+    choice(renderer, RENDERERS, "renderer")
+    if renderer == "pybullet":
+        return None
+    views = tuple(view for view, _ in pixel_spec(core.spec.env_id).views)
+    if camera not in views:
+        raise ValueError(f"renderer='fast' draws the endoscope cameras {list(views)}; camera={camera!r} needs "
+                         "renderer='pybullet' (the external view and the overlays are pybullet's)")
+    return FastRender(core, camera)
+
+
 __all__ = ["OBS_MODES", "MODE_MODALITIES", "OBSERVATION_KEYWORDS", "DEFAULT_IMAGE_SIZE", "STATE_LIMIT",
            "check_obs_mode", "check_image_size", "image_shape", "PixelSpec", "PIXEL_SPECS", "register_pixels",
            "pixel_spec", "observation_space", "PixelObserver", "make_observer", "stack_rows", "mismatch_groups",
-           "with_rows", "cameras"]
+           "with_rows", "cameras", "RENDERERS", "FastRender", "fast_render"]

@@ -17,7 +17,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from continuum_gym.envs.batched import check_actions
-from continuum_gym.envs.pixels import make_observer
+from continuum_gym.envs.pixels import fast_render, make_observer
 from continuum_gym.envs.single import CoreOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.envs.vector import row_generators
@@ -54,6 +54,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         seed: row i is seeded with seed + i (as ``SyncVectorEnv``/``DummyVecEnv`` would seed it).
         render_mode: ``"rgb_array"`` for ``render()``/``get_images()`` (e.g. ``VecVideoRecorder``).
         camera: the camera those images are taken from.
+        renderer: ``"pybullet"`` (default) or ``"fast"`` (the batched renderer: endoscope cameras only).
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
@@ -61,7 +62,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
     metadata: dict[str, Any]
 
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
-                 camera: str = "external", **kwargs: Any) -> None:
+                 camera: str = "external", renderer: str = "pybullet", **kwargs: Any) -> None:
         from continuum_gym.envs.single import check_render_arguments
 
         self.env_id = env_id
@@ -71,6 +72,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.render_mode, self.camera, _ = check_render_arguments({"render_modes": ["rgb_array"]}, self.core,
                                                                   render_mode, camera, False)
         self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
+        self._fast = fast_render(self.core, renderer, self.camera)  # get_images() by the batched renderer, or None
         super().__init__(num_envs, self.core.single_observation_space if self._pixels is None else self._pixels.space,
                          self.core.single_action_space)
         self.spec = _gym_spec(env_id)
@@ -186,6 +188,8 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         """One RGB image per row (``render_mode="rgb_array"``), else Nones."""
         if self.render_mode is None:
             return [None] * self.num_envs
+        if self._fast is not None:  # one call for every row
+            return list(self._fast.images())
         if self._scene is None:
             self._scene = self.core.make_scene()
         return [self.core.render_row(row, self._scene, self.camera) for row in range(self.num_envs)]

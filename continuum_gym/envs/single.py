@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
-from continuum_gym.envs.pixels import make_observer
+from continuum_gym.envs.pixels import fast_render, make_observer
 from continuum_gym.validation import boolean, choice
 
 if TYPE_CHECKING:
@@ -98,11 +98,12 @@ class ContinuumEnv(SceneOwner, gym.Env):
     action_space: spaces.Box  # the core's single_action_space
 
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
-                 **kwargs: Any) -> None:
+                 renderer: str = "pybullet", **kwargs: Any) -> None:
         self.core = self.core_class(num_envs=1, **kwargs)
         self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
             self.metadata, self.core, render_mode, camera, pixel_occlusion)
         self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
+        self._fast = fast_render(self.core, renderer, self.camera)  # render() by the batched renderer, or None
         self.observation_space = self.core.single_observation_space if self._pixels is None else self._pixels.space
         self.action_space = self.core.single_action_space
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
@@ -155,6 +156,8 @@ class ContinuumEnv(SceneOwner, gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
+        if self._fast is not None:
+            return self._fast.images([0])[0]
         return self.core.render_row(0, self.scene(), self.camera)
 
     def close(self) -> None:

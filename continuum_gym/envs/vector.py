@@ -27,7 +27,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
 from continuum_gym.envs.info import RewardTerms
-from continuum_gym.envs.pixels import make_observer
+from continuum_gym.envs.pixels import fast_render, make_observer
 from continuum_gym.envs.single import (
     SceneOwner,
     check_render_arguments,
@@ -83,7 +83,8 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  camera: str = "external", pixel_occlusion: bool = False,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, renderer: str = "pybullet",
+                 **kwargs: Any) -> None:
         self.num_envs = integer(num_envs, "num_envs", low=1)
         if max_episode_steps is not None:  # else a given config's own limit stays
             kwargs["max_episode_steps"] = max_episode_steps
@@ -94,6 +95,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode,
                          "render_fps": int(round(1.0 / self.core.control_dt))}
         self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
+        self._fast = fast_render(self.core, renderer, self.camera)  # render() by the batched renderer, or None
         self.single_observation_space = self.core.single_observation_space if self._pixels is None \
             else self._pixels.space
         self.single_action_space = self.core.single_action_space
@@ -218,6 +220,8 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make_vec()")
             return None
+        if self._fast is not None:  # one call for every row
+            return tuple(self._fast.images())
         scene = self.scene()
         return tuple(self.core.render_row(row, scene, self.camera) for row in range(self.num_envs))
 

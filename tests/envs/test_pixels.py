@@ -421,3 +421,25 @@ def test_the_trainer_keeps_large_blocks_in_its_heap_in_a_child_process():
             "assert keep_large_blocks(); a = np.ones(50_000_000 // 8); del a; print('ok')")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0 and result.stdout.strip() == "ok", result.stderr
+
+
+def test_render_of_an_endoscope_camera_by_the_fast_renderer():
+    import continuum_gym.camera as cam
+
+    env = gym.make(VIEW, render_mode="rgb_array", camera="davinci", renderer="fast")
+    env.reset(seed=2)
+    image = env.render()
+    core = env.unwrapped.core
+    scene = cam.view_tracking_scene(core.config.robot, core.config.davinci, core.frustum, core.q,
+                                    core.davinci_configuration(0)[None], width=128)
+    np.testing.assert_array_equal(image, cam.Renderer().render(scene, "davinci", ("rgb",)).rgb[0])
+    vec = gym.make_vec(OCC, num_envs=2, vectorization_mode="vector_entry_point", render_mode="rgb_array",
+                       camera="endoscope", renderer="fast")
+    vec.reset(seed=0)
+    images = vec.render()
+    assert len(images) == 2 and images[0].shape == (128, 128, 3) and images[0].dtype == np.uint8
+    assert not np.array_equal(images[0], images[1])  # two rows, two states
+    with pytest.raises(ValueError, match="renderer='fast' draws the endoscope cameras"):
+        gym.make(OCC, render_mode="rgb_array", camera="external", renderer="fast")
+    with pytest.raises(ValueError, match="renderer must be one of"):
+        gym.make(OCC, render_mode="rgb_array", camera="endoscope", renderer="opengl")
