@@ -443,3 +443,37 @@ def test_render_of_an_endoscope_camera_by_the_fast_renderer():
         gym.make(OCC, render_mode="rgb_array", camera="external", renderer="fast")
     with pytest.raises(ValueError, match="renderer must be one of"):
         gym.make(OCC, render_mode="rgb_array", camera="endoscope", renderer="opengl")
+
+
+def test_rows_of_different_true_robots_are_each_drawn_as_their_own():
+    import dataclasses
+
+    import continuum_gym.camera as cam
+    from continuum_gym.geometry.lens_cone import LensCone
+
+    vec = gym.make_vec(OCC, num_envs=3, vectorization_mode="vector_entry_point", obs_mode="segmentation",
+                       image_size=48, model_error="severe")  # a fixed error per task id: three true robots
+    obs, _ = vec.reset(seed=5)
+    core = vec.unwrapped.core
+    arrays = core._mismatch.arrays
+    assert len({tuple(arrays.scale[row]) for row in range(3)}) == 3
+    robot, cone = core.config.robot, core.config.cone
+    for row in range(3):
+        true_robot = dataclasses.replace(robot, lengths=tuple(np.asarray(robot.lengths) * arrays.scale[row]))
+        true_cone = LensCone(cone.d_o + arrays.calib[row, 0], cone.alpha + arrays.calib[row, 1], cone.beta,
+                             cone.lens_model)
+        scene = cam.occlusion_scene(true_robot, true_cone, core.q[row:row + 1], core.gamma[row:row + 1], width=48)
+        expected = cam.Renderer().render(scene, "endoscope", ("segmentation",)).segmentation[0]
+        np.testing.assert_array_equal(obs["segmentation"][row], expected)
+
+
+def test_an_image_env_pickles_and_steps_again():
+    import pickle
+
+    env = make(OCC, "rgbd")
+    obs, _ = steps(env, 1)
+    again = pickle.loads(pickle.dumps(env.unwrapped))
+    a, *_ = env.unwrapped.step(np.zeros(8, dtype=np.float32))
+    b, *_ = again.step(np.zeros(8, dtype=np.float32))
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
