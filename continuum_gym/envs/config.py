@@ -284,7 +284,7 @@ def check_common(config: EnvConfig) -> None:
 
     set_ = object.__setattr__
     choice(config.on_non_finite, ON_NON_FINITE, "on_non_finite")
-    from continuum_gym.envs.pixels import check_image_size, check_obs_mode
+    from continuum_gym.envs.obs_modes import check_image_size, check_obs_mode
 
     check_obs_mode(config.obs_mode)
     set_(config, "image_size", check_image_size(config.image_size))
