@@ -70,9 +70,12 @@ class RunBusyError(RuntimeError):
     """Another process is training the same run directory."""
 
 
-def run_name(env_id: str, algo: str, base: str | None, seed: int) -> str:
+def run_name(env_id: str, algo: str, base: str | None, seed: int, obs_mode: str | None = None) -> str:
+    """``<Env>_<algo>_<base>_seed<n>``; a policy that sees images has its ``obs_mode`` before the seed
+    (``OcclusionAvoidance_ppo_projected_gradient_rgbd_seed0``, ``+`` as ``_``)."""
     short = env_id.split("/")[-1].split("-")[0]
-    return f"{short}_{algo}_{base or 'pure_rl'}_seed{seed}"
+    mode = "" if obs_mode in (None, "state") else f"_{str(obs_mode).replace('+', '_')}"
+    return f"{short}_{algo}_{base or 'pure_rl'}{mode}_seed{seed}"
 
 
 def resolve_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
@@ -267,7 +270,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
     check_combination(algo, hp, n, source)
     little = check_budget(_algo_class(algo), hp, total, base is not None, source,
                           "--steps" if steps is not None else "n_timesteps")
-    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed)
+    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed,
+                                                      (hp.get("env_kwargs") or {}).get("obs_mode"))
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
     run = {**RUN_DEFAULTS, **hp}
@@ -282,6 +286,10 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
 
     threads = learner_threads()
     env_kwargs = dict(run["env_kwargs"] or {})
+    if env_kwargs.get("obs_mode", "state") != "state":  # image batches: no page faults per step (allocator.py)
+        from continuum_gym.agents.allocator import keep_large_blocks
+
+        threads["large_blocks_kept"] = keep_large_blocks()
     env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
     try:  # the environment checks its own keywords; still nothing written
         venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", **env_kwargs)
@@ -421,6 +429,10 @@ def _algo_value(key, value):
         return linear_schedule(value, key)
     if key == "train_freq" and isinstance(value, list):
         return tuple(value)
+    if key == "policy_kwargs" and isinstance(value, dict) and isinstance(value.get("features_extractor_class"), str):
+        from continuum_gym.plugins import load_object  # YAML names the class "module:Class" (pixel policies)
+
+        return {**value, "features_extractor_class": load_object(value["features_extractor_class"])}
     return value
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from continuum_gym.envs.batched import check_actions
+from continuum_gym.envs.pixels import fast_render, make_observer
 from continuum_gym.envs.single import CoreOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.envs.vector import row_generators
@@ -53,6 +54,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         seed: row i is seeded with seed + i (as ``SyncVectorEnv``/``DummyVecEnv`` would seed it).
         render_mode: ``"rgb_array"`` for ``render()``/``get_images()`` (e.g. ``VecVideoRecorder``).
         camera: the camera those images are taken from.
+        renderer: ``"pybullet"`` (default) or ``"fast"`` (the batched renderer: endoscope cameras only).
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
@@ -60,7 +62,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
     metadata: dict[str, Any]
 
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
-                 camera: str = "external", **kwargs: Any) -> None:
+                 camera: str = "external", renderer: str = "pybullet", **kwargs: Any) -> None:
         from continuum_gym.envs.single import check_render_arguments
 
         self.env_id = env_id
@@ -69,7 +71,10 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.core = core_class(env_id)(num_envs=num_envs, **self.env_kwargs)
         self.render_mode, self.camera, _ = check_render_arguments({"render_modes": ["rgb_array"]}, self.core,
                                                                   render_mode, camera, False)
-        super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
+        self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
+        self._fast = fast_render(self.core, renderer, self.camera)  # get_images() by the batched renderer, or None
+        super().__init__(num_envs, self.core.single_observation_space if self._pixels is None else self._pixels.space,
+                         self.core.single_action_space)
         self.spec = _gym_spec(env_id)
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._rngs = row_generators(seed, num_envs)
@@ -88,7 +93,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.core.reset_rows(np.arange(self.num_envs), ids)
         self._returns[:] = 0.0
         self._lengths[:] = 0
-        return self.core.obs.astype(np.float32)
+        return self._observe()
 
     def step_async(self, actions: np.ndarray) -> None:
         shape = (self.num_envs,) + self.action_space.shape
@@ -103,15 +108,18 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self._lengths += 1
         rewards = rewards.astype(np.float32)
         dones = terminated | truncated
-        obs = self.core.obs.astype(np.float32)
+        obs = self._observe()
         batch = dict(self.core.info())
+        if self._pixels is not None:
+            batch.update(self._pixels.info())
         batch["reward_terms"] = self.core.reward_terms()
         batch["action_clipped"] = clipped
         infos = []
         for i in range(self.num_envs):
             info = {key: value[i].copy() if value.ndim > 1 else value[i] for key, value in batch.items()}
             if dones[i]:
-                info["terminal_observation"] = obs[i].copy()
+                info["terminal_observation"] = obs[i].copy() if self._pixels is None \
+                    else {key: value[i].copy() for key, value in obs.items()}
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
                 info["episode"] = {"r": float(self._returns[i]), "l": int(self._lengths[i]),
                                    "t": round(time.time() - self._started, 6)}
@@ -120,10 +128,20 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         if len(finished):
             ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in finished])
             self.core.reset_rows(finished, ids)
-            obs[finished] = self.core.obs[finished]
+            if self._pixels is None:
+                obs[finished] = self.core.obs[finished]
+            else:
+                obs = self._observe(finished)
             self._returns[finished] = 0.0
             self._lengths[finished] = 0
         return obs, rewards, dones, infos
+
+    def _observe(self, rows: np.ndarray | None = None) -> Any:
+        """The state batch, or the images of ``obs_mode`` (``rows``: only those changed since the last call)."""
+        if self._pixels is None:
+            return self.core.obs.astype(np.float32)
+        self._pixels.update(rows)
+        return self._pixels.observations()
 
     def close(self) -> None:
         if self._scene is not None:
@@ -170,6 +188,8 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         """One RGB image per row (``render_mode="rgb_array"``), else Nones."""
         if self.render_mode is None:
             return [None] * self.num_envs
+        if self._fast is not None:  # one call for every row
+            return list(self._fast.images())
         if self._scene is None:
             self._scene = self.core.make_scene()
         return [self.core.render_row(row, self._scene, self.camera) for row in range(self.num_envs)]

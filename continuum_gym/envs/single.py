@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.envs.pixels import fast_render, make_observer
 from continuum_gym.validation import boolean, choice
 
 if TYPE_CHECKING:
@@ -101,18 +102,20 @@ class ContinuumEnv(SceneOwner, gym.Env):
     action_space: spaces.Box  # the core's single_action_space
 
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
-                 **kwargs: Any) -> None:
+                 renderer: str = "pybullet", **kwargs: Any) -> None:
         self.core = self.core_class(num_envs=1, **kwargs)
         self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
             self.metadata, self.core, render_mode, camera, pixel_occlusion)
-        self.observation_space = self.core.single_observation_space
+        self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
+        self._fast = fast_render(self.core, renderer, self.camera)  # render() by the batched renderer, or None
+        self.observation_space = self.core.single_observation_space if self._pixels is None else self._pixels.space
         self.action_space = self.core.single_action_space
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._scene = None
         self._needs_reset = True
         self._active = np.ones(1, dtype=np.uint8)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         super().reset(seed=seed)
         options = check_reset_options(options, RESET_OPTIONS)
         task_id = options.get("task_id")
@@ -120,16 +123,23 @@ class ContinuumEnv(SceneOwner, gym.Env):
             task_id = self.core.sample_task_id(self.np_random)
         self.core.reset_rows(np.array([0]), self.core.check_task_ids(task_id, 1, "options['task_id']"))
         self._needs_reset = False
-        return self.core.obs[0].astype(np.float32), self._info(clipped=False)
+        return self._observation(), self._info(clipped=False)
 
-    def step(self, action: npt.ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict]:
+    def step(self, action: npt.ArrayLike) -> tuple[Any, float, bool, bool, dict]:
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step(): the episode has ended or never started")
         action, clipped = check_actions(action, self.action_space.shape)
         rewards, terminated, truncated = self.core.step(action, self._active)
         self._needs_reset = bool(terminated[0] or truncated[0])
-        return (self.core.obs[0].astype(np.float32), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
+        return (self._observation(), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
                 self._info(clipped=bool(clipped[0])))
+
+    def _observation(self) -> Any:
+        """The state row, or the images of ``obs_mode`` rendered from it (which also measures the pixel metric)."""
+        if self._pixels is None:
+            return self.core.obs[0].astype(np.float32)
+        self._pixels.update()
+        return self._pixels.observation(0)
 
     @property
     def episode_steps(self) -> int:
@@ -142,12 +152,16 @@ class ContinuumEnv(SceneOwner, gym.Env):
         info["action_clipped"] = np.bool_(clipped)
         if self._pixel_occlusion:
             info["pixel_occlusion"] = np.float64(self.core.pixel_occlusion(0, self.scene()))
+        if self._pixels is not None:
+            info.update(self._pixels.info_row(0))
         return info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
+        if self._fast is not None:
+            return self._fast.images([0])[0]
         return self.core.render_row(0, self.scene(), self.camera)
 
     def close(self) -> None:

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from continuum_gym.envs.benchmark import benchmark_of
+from continuum_gym.envs.obs_modes import OBSERVATION_KEYWORDS
 from continuum_gym.envs.spec import (
     ENV_SPECS,
     EnvSpec,
@@ -77,7 +78,8 @@ def discover_policies(directory: str | Path, skipped: dict | None = None) -> dic
             skipped[str(run)] = str(error).splitlines()[0]
             print(f"continuum-gym evaluate: skipping {run}: {skipped[str(run)]}", file=sys.stderr)
             continue
-        method = method_name(config.get("base_controller"), config.get("algo"))
+        env_config = config.get("env_config") or config.get("env_kwargs") or {}
+        method = method_name(config.get("base_controller"), config.get("algo"), env_config.get("obs_mode"))
         found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
     if not found and not skipped:
         print(f"continuum-gym evaluate: warning: --policies {directory} holds no trained run (config.yml + "
@@ -91,13 +93,15 @@ def _sb3_algo(policy: Any) -> str | None:
     return name if name in ("ppo", "sac", "td3") and hasattr(policy, "predict") else None
 
 
-def method_name(base: str | None, algo: str | None) -> str:
+def method_name(base: str | None, algo: str | None, obs_mode: str | None = None) -> str:
     """A learned method's row: ``residual_<base>`` / ``pure_rl`` for PPO (the headline rows), else with
-    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``)."""
+    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``); a policy that sees images has its
+    ``obs_mode`` appended (``residual_projected_gradient_rgbd``, ``+`` as ``_``)."""
     from continuum_gym.plugins import split_reference
 
     name = f"residual_{split_reference(base)[1]}" if base else "pure_rl"
-    return name if algo in (None, "ppo") else f"{name}_{algo}"
+    name = name if algo in (None, "ppo") else f"{name}_{algo}"
+    return name if obs_mode in (None, "state") else f"{name}_{str(obs_mode).replace('+', '_')}"
 
 
 def load_policy(run: Path) -> tuple[BaseAlgorithm, dict[str, Any]]:
@@ -119,7 +123,9 @@ def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
     (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
     """
     source = config.get("env_config") or config.get("env_kwargs") or {}
-    picked = {key: value for key, value in source.items() if key in benchmark_of(spec).policy_keys}
+    # what the policy acts on (its benchmark's policy_keys) and what it sees (obs_mode, image_size)
+    keys = (*benchmark_of(spec).policy_keys, *OBSERVATION_KEYWORDS)
+    picked = {key: value for key, value in source.items() if key in keys}
     spec.config_class.from_kwargs(**picked)  # the same checks as the env's: a broken config fails here, named
     return picked
 
@@ -139,7 +145,8 @@ def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict
     except ValueError as error:
         raise type(error)(f"env_kwargs (--env-kwargs): {error}") from None
     ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
-    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in benchmark_of(spec).policy_keys}
+    keys = (*benchmark_of(spec).policy_keys, *OBSERVATION_KEYWORDS)
+    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in keys}
     return env_kwargs, policy, ignored
 
 
@@ -206,12 +213,14 @@ def discovered_methods(spec: EnvSpec, policies: dict, skipped: dict, env_id: str
 
 # ---------------------------------------------------------------------- evaluation
 def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress: bool = True,
-                 env_kwargs: dict | None = None, split: str = "test", skipped: dict | None = None) -> dict:
+                 env_kwargs: dict | None = None, split: str = "test", skipped: dict | None = None,
+                 pixel_metrics: bool = False) -> dict:
     """Per method: per task set, scores (runs x episodes) of each metric, plus traces for figures.
 
     ``methods`` is [(name, [MethodRun])]; every run acts in the env built from ``env_kwargs`` (the
     protocol env: robot, limits, ...) plus its own policy keywords, on the protocol's task sets of ``split``.
     A run whose observations do not fit, or whose policy fails, is reported and recorded in ``skipped``.
+    ``pixel_metrics``: every method's episodes also measure the env's pixel metrics (rendered every step).
     """
     from tqdm.auto import tqdm
 
@@ -241,14 +250,16 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         policy = ZeroResidual(action_dim) if run.policy is None else as_predictor(run.policy, name, run.source)
         declared = getattr(policy, "observation_shape", None)
         try:
-            if declared is not None and declared != core.single_observation_space.shape:
+            if declared is not None and declared != core.single_observation_space.shape \
+                    and core.config.obs_mode == "state":
                 built = {k: v for k, v in kwargs.items() if k not in ("task", "task_split", "grid")}
                 robot = core.config.to_dict().get("robot")
                 raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
                                   f"{core.single_observation_space.shape}: {env_id} built with {built} (robot "
                                   f"{robot}); pass the keywords it was trained with "
                                   "(--env-kwargs, or its registered id with --import)")
-            result = run_episodes(core, policy, np.arange(count), record=task_set.task == benchmark_of(spec).trace_task)
+            result = run_episodes(core, policy, np.arange(count),
+                                  record=task_set.task == benchmark_of(spec).trace_task, pixel_metrics=pixel_metrics)
         except PolicyError as error:
             failed.add(name)
             skipped[f"{name}[{index}]"] = str(error)
@@ -269,12 +280,14 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
 # ---------------------------------------------------------------------- API
 def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, env_kwargs: dict | None = None,
                      episodes: int = 32, grid: int = 21, split: str = "test", progress: bool = True,
-                     references: bool = True) -> tuple[dict, dict, dict]:
+                     references: bool = True, pixel_metrics: bool = False) -> tuple[dict, dict, dict]:
     """(table, results, metadata) of the baselines, the SB3 runs in ``policies`` and ``extra`` methods.
 
     ``extra`` is [(name, [MethodRun])]; ``env_kwargs`` the protocol env every method runs in (its policy
     keywords go to the ``extra`` methods only). The table has every baseline, the offline optimum of
-    this env (computed once and cached for a variant), each method and ``headroom_closed``.
+    this env (computed once and cached for a variant), each method and ``headroom_closed``; with
+    ``pixel_metrics`` also the env's pixel metric (``mean_image_occlusion``, ``mean_view_centre_error_pct``) of
+    every method beside the headline metric.
     """
     from continuum_gym.evaluation.benchmark import metadata
     from continuum_gym.evaluation.comparison import add_improvement, add_training
@@ -289,7 +302,7 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
     skipped: dict = {}
     learned = discovered_methods(spec, policies or {}, skipped, env_id) + extra
     methods = baseline_methods(spec, own_bases(spec, env_id, learned, environment)) + learned
-    results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
+    results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped, pixel_metrics)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
     table = aggregate(env_id, results, optimum, grid, trained_bases(methods))
     for name, runs in learned:  # which algorithm, and over how many seeds, beside a learned row's metrics
@@ -391,6 +404,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                      "plus metadata) here")
     parser.add_argument("--env", nargs="+", default=None, help="environment ids (default: all, or the one of "
                                                                 "--policy's --env-kwargs)")
+    parser.add_argument("--pixel-metrics", action="store_true",
+                        help="also measure each method's pixel metric (OcclusionAvoidance: mean pixel occlusion of "
+                             "the endoscope image; ViewTracking: mean view-centre error, %% of the image width), "
+                             "rendering every step with the batched renderer")
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -465,7 +482,7 @@ def run(args: argparse.Namespace) -> int:
     for env_id in env_ids:
         table, results, meta[env_id] = evaluate_methods(
             env_id, extra, policies, env_kwargs=env_kwargs, episodes=args.episodes, grid=args.grid,
-            split=args.split, progress=not args.no_progress)
+            split=args.split, progress=not args.no_progress, pixel_metrics=args.pixel_metrics)
         summary[env_id] = table
         meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
         report.append(markdown(env_id, table, results) + model_error_note(env_kwargs) + comparison_notes(env_id, table)

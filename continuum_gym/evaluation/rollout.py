@@ -31,6 +31,8 @@ class ZeroResidual:
     def predict(self, observation: ArrayLike, state: tuple[np.ndarray, ...] | None = None,
                 episode_start: np.ndarray | None = None, deterministic: bool = False
                 ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        if isinstance(observation, dict):  # an image obs_mode: the measured state sets the batch shape
+            observation = observation["state"]
         observation = np.asarray(observation)
         return np.zeros(observation.shape[:-1] + (self.action_dim,), dtype=np.float32), state
 
@@ -45,7 +47,7 @@ def make_core(env_id: str, num_envs: int, **env_kwargs: Any) -> BatchedCore:
 
 
 def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: Progress | None = None,
-                 record: bool = False) -> dict[str, np.ndarray]:
+                 record: bool = False, pixel_metrics: bool = False) -> dict[str, np.ndarray]:
     """Run one episode per task id (all in one batch) until each ends; returns per-episode metrics.
 
     Args:
@@ -55,6 +57,9 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
         task_ids: task instance per row.
         progress: optional tqdm-like object updated once per step.
         record: also return per-step traces (``trace_<value>`` arrays of shape (steps, N), NaN after the end).
+        pixel_metrics: also measure the env's pixel metrics (``envs/pixels.py``; e.g. ``mean_image_occlusion``),
+            rendering every step; a core whose ``obs_mode`` is an image mode always does, its policy sees the
+            images.
 
     Returns:
         dict of metric name -> (N,) array (the spec's episode metrics), plus ``return``, ``length`` and
@@ -68,7 +73,11 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     if core.num_envs != n:
         raise ValueError(f"core has {core.num_envs} rows for {n} task ids")
     spec = core.spec
+    observer = _observer(core, pixel_metrics)
     core.reset_rows(np.arange(n), task_ids)
+    if observer is not None:
+        observer.update()
+    images = observer is not None and observer.obs_mode != "state"
     active = np.ones(n, dtype=np.uint8)
     faulted = core.non_finite().copy()  # rows with a value that is not finite (on_non_finite="truncate")
     sums: dict = {}
@@ -79,13 +88,17 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     clipped = np.zeros(n)
     action_dim = core.single_action_space.shape[0]
     while active.any():
-        actions = predictor.act(core.obs.astype(np.float32), action_dim)
+        observation = observer.observations(copy=False) if images else core.obs.astype(np.float32)
+        actions = predictor.act(observation, action_dim)
         outside = np.abs(actions) > 1.0
         clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]
         actions = np.clip(actions, -1.0, 1.0)
         rewards, terminated, truncated = core.step(np.ascontiguousarray(actions), active)
         alive = active.astype(bool)
         values = core.step_values()
+        if observer is not None:
+            observer.update()
+            values.update(observer.metrics)
         for key, value in values.items():
             sums.setdefault(key, np.zeros(n))[alive] += value[alive]
             finals.setdefault(key, np.zeros(n))[alive] = value[alive]
@@ -106,7 +119,8 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
             "them would hide the failure, so none is reported. Find the plug-in with on_non_finite='raise' (the "
             "default), which names it")
     out = {}
-    for metric in spec.episode_metrics:
+    reductions = spec.episode_metrics + (observer.spec.episode_metrics if observer is not None else ())
+    for metric in reductions:
         if metric.reduce == "final":
             out[metric.name] = finals[metric.step_value]
         else:
@@ -117,3 +131,13 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     if record:
         out.update({f"trace_{key}": np.array(value) for key, value in traces.items()})
     return out
+
+
+def _observer(core: BatchedCore, pixel_metrics: bool) -> Any:
+    """The core's image observer: for an image ``obs_mode`` or when the pixel metrics are asked for, else None."""
+    from continuum_gym.envs.pixels import PixelObserver
+
+    mode = getattr(core.config, "obs_mode", "state")
+    if mode == "state" and not pixel_metrics:
+        return None
+    return PixelObserver(core)
