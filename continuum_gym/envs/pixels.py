@@ -1,10 +1,13 @@
 """Image observations (issue 56): an observation layer over a batched core's state, rendered by ``camera``.
 
-The environments' physics never sees a pixel. After a step or a reset, ``PixelObserver.update`` builds the
-analytic scene of every row from the core's state (its true joints, the endoscope's rotation, the true
-robot under a model error) and renders it with ``camera.Renderer`` into preallocated buffers: one compiled
-call per view and batch, threaded. The front ends (``single.py``, ``vector.py``, ``sb3.py``, ``goal.py``)
-return those buffers as a ``Dict`` observation instead of ``core.obs`` when ``obs_mode`` is not ``"state"``.
+The environments' physics never sees a pixel. A batched core whose ``config.obs_mode`` is an image mode holds a
+``PixelObserver`` (``core.pixels``, made once by ``BatchedCore``): a step or a reset marks the rows it changed, and
+the next read of the observations or of ``info`` builds the analytic scene of those rows from the core's state
+(its true joints, the endoscope's rotation, the true robot under a model error) and renders it with
+``camera.Renderer`` into preallocated buffers: one compiled call per view and batch, threaded. The core's
+``single_observation_space`` is then the ``Dict`` of the images and ``observations()`` / ``observation(row)`` return
+them, so every front end (``single.py``, ``vector.py``, ``sb3.py``, and ``goal.py`` over the single env) observes
+images through the same two calls it makes for the state; no env and no front end has code of its own for them.
 
 The layer reads the core only through what every core keeps: ``num_envs``, ``config``, ``q``,
 ``sensed_joints()``, ``base_cmd``, ``steps``, ``control_dt``, ``spec.env_id`` and the env-specific state its
@@ -47,7 +50,7 @@ if TYPE_CHECKING:
     from gymnasium import spaces
 
     from continuum_gym.camera import Frames, Scene
-    from continuum_gym.envs.spec import EpisodeMetric, Metric
+    from continuum_gym.envs.declared import EpisodeMetric, Metric
 
 #: Bound of the ``state`` entry's values (SI units): far beyond any joint, rotation or rate of the robots, finite
 #: so that the checkers accept the space; values beyond it (a diverging plug-in) are clipped to it.
@@ -129,7 +132,10 @@ def observation_space(spec: PixelSpec, obs_mode: str, height: int, width: int, s
 
 
 class PixelObserver:
-    """Renders every row of a core into preallocated image buffers; the front ends' image observations.
+    """Renders the rows of a core into preallocated image buffers: the core's image observations (``core.pixels``).
+
+    Rows marked ``stale`` (the core marks the rows a step or a reset changed) are rendered at the next read
+    (``observations``, ``observation``, ``info``, ``info_row``), each once; ``update`` renders at once.
 
     Args:
         core: the batched core (any env with a registered ``PixelSpec``).
@@ -162,8 +168,21 @@ class PixelObserver:
                          for view, modalities in self._modalities.items()}
         self.state = np.zeros((n, self.state_dim), dtype=np.float32)
         self.metrics: dict[str, np.ndarray] = {}
+        self._stale = np.ones(n, dtype=bool)  # rows changed since they were last rendered
 
     # ------------------------------------------------------------------ rendering
+    def stale(self, rows: Any = None) -> None:
+        """Mark ``rows`` (indices or an (N,) bool mask; None: all) as changed: they are rendered at the next read."""
+        if rows is None:
+            self._stale[:] = True
+        else:
+            self._stale[rows] = True
+
+    def refresh(self) -> None:
+        """Render the rows marked stale, if any (all of them in one call when every row is)."""
+        if self._stale.any():
+            self.update(None if self._stale.all() else np.flatnonzero(self._stale))
+
     def update(self, rows: Any = None) -> None:
         """Render ``rows`` (None: all) from the core's current state, and measure their pixel metrics."""
         n = self.core.num_envs
@@ -172,6 +191,7 @@ class PixelObserver:
         np.clip(self.spec.state(self.core), -STATE_LIMIT, STATE_LIMIT, out=self.state, casting="same_kind")
         if len(index) == 0:
             return
+        self._stale[index] = False
         scene = self.spec.scene(self.core, index, self.height, self.width)
         frames = {}
         for view, modalities in self._modalities.items():
@@ -194,6 +214,7 @@ class PixelObserver:
     # ------------------------------------------------------------------ observations
     def observations(self, copy: bool = True) -> dict[str, np.ndarray]:
         """Every row's observation {key: (N, ...)}: fresh arrays (``copy``) or the buffers themselves."""
+        self.refresh()
         out: dict[str, np.ndarray] = {}
         for view, prefix in self.spec.views:
             for modality in self.observed:
@@ -208,10 +229,12 @@ class PixelObserver:
 
     def info_row(self, row: int) -> dict[str, Any]:
         """One row's pixel metrics as numpy scalars (the single env's ``info`` entries)."""
+        self.refresh()
         return {key: value[row] for key, value in self.metrics.items()}
 
     def info(self) -> dict[str, np.ndarray]:
         """Every row's pixel metrics {key: (N,) float64} (copies)."""
+        self.refresh()
         return {key: value.copy() for key, value in self.metrics.items()}
 
     def __getstate__(self) -> dict:
@@ -234,7 +257,7 @@ def _camera_frames(scene: Scene, view: str) -> Frames:
 
 
 def make_observer(core: Any) -> PixelObserver | None:
-    """A ``PixelObserver`` of the core's configured ``obs_mode``, or None for ``"state"`` (the front ends' hook)."""
+    """A ``PixelObserver`` of the core's configured ``obs_mode``, or None for ``"state"`` (``BatchedCore``'s hook)."""
     mode = getattr(core.config, "obs_mode", "state")
     return None if mode == "state" else PixelObserver(core)
 

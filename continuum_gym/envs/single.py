@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
-from continuum_gym.envs.pixels import fast_render, make_observer
+from continuum_gym.envs.pixels import fast_render
 from continuum_gym.validation import boolean, choice
 
 if TYPE_CHECKING:
@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 
     from continuum_gym.envs.batched import RowScene
     from continuum_gym.envs.config import EnvConfig
+    from continuum_gym.envs.pixels import FastRender
 
 #: Keys ``reset(options=...)`` understands.
 RESET_OPTIONS = ("task_id",)
@@ -73,9 +74,28 @@ class CoreOwner:
 
 
 class SceneOwner(CoreOwner):
-    """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""
+    """What draws ``render()``: the pybullet scene of an env's core (built on first use, released by
+    ``close_scene()``, never pickled) or, with ``renderer="fast"``, the batched renderer (``envs/pixels.py``)."""
 
     _scene: RowScene | None = None
+    _fast: FastRender | None = None
+    render_mode: str | None
+    camera: str
+    _pixel_occlusion: bool
+
+    def _check_render(self, metadata: dict, render_mode: Any, camera: Any, pixel_occlusion: Any,
+                      renderer: Any) -> None:
+        """Set ``render_mode``, ``camera``, the pixel occlusion and the renderer from the front end's keywords."""
+        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
+            metadata, self.core, render_mode, camera, pixel_occlusion)
+        self._fast = fast_render(self.core, renderer, self.camera)  # the batched renderer, or None: pybullet
+
+    def images(self, rows: Any) -> list[np.ndarray]:
+        """RGB images of ``rows`` through ``camera``: the batched renderer's (one call) or the pybullet scene's."""
+        if self._fast is not None:
+            return list(self._fast.images(rows))
+        scene = self.scene()
+        return [self.core.render_row(row, scene, self.camera) for row in rows]
 
     def scene(self) -> RowScene:
         """The pybullet scene that renders this env's rows (built on first use; ``close()`` releases it)."""
@@ -104,11 +124,8 @@ class ContinuumEnv(SceneOwner, gym.Env):
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
                  renderer: str = "pybullet", **kwargs: Any) -> None:
         self.core = self.core_class(num_envs=1, **kwargs)
-        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
-            self.metadata, self.core, render_mode, camera, pixel_occlusion)
-        self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
-        self._fast = fast_render(self.core, renderer, self.camera)  # render() by the batched renderer, or None
-        self.observation_space = self.core.single_observation_space if self._pixels is None else self._pixels.space
+        self._check_render(self.metadata, render_mode, camera, pixel_occlusion, renderer)
+        self.observation_space = self.core.single_observation_space  # a Dict of images for an image obs_mode
         self.action_space = self.core.single_action_space
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._scene = None
@@ -123,7 +140,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
             task_id = self.core.sample_task_id(self.np_random)
         self.core.reset_rows(np.array([0]), self.core.check_task_ids(task_id, 1, "options['task_id']"))
         self._needs_reset = False
-        return self._observation(), self._info(clipped=False)
+        return self.core.observation(0), self._info(clipped=False)
 
     def step(self, action: npt.ArrayLike) -> tuple[Any, float, bool, bool, dict]:
         if self._needs_reset:
@@ -131,15 +148,8 @@ class ContinuumEnv(SceneOwner, gym.Env):
         action, clipped = check_actions(action, self.action_space.shape)
         rewards, terminated, truncated = self.core.step(action, self._active)
         self._needs_reset = bool(terminated[0] or truncated[0])
-        return (self._observation(), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
+        return (self.core.observation(0), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
                 self._info(clipped=bool(clipped[0])))
-
-    def _observation(self) -> Any:
-        """The state row, or the images of ``obs_mode`` rendered from it (which also measures the pixel metric)."""
-        if self._pixels is None:
-            return self.core.obs[0].astype(np.float32)
-        self._pixels.update()
-        return self._pixels.observation(0)
 
     @property
     def episode_steps(self) -> int:
@@ -152,17 +162,13 @@ class ContinuumEnv(SceneOwner, gym.Env):
         info["action_clipped"] = np.bool_(clipped)
         if self._pixel_occlusion:
             info["pixel_occlusion"] = np.float64(self.core.pixel_occlusion(0, self.scene()))
-        if self._pixels is not None:
-            info.update(self._pixels.info_row(0))
         return info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
-        if self._fast is not None:
-            return self._fast.images([0])[0]
-        return self.core.render_row(0, self.scene(), self.camera)
+        return self.images([0])[0]
 
     def close(self) -> None:
         self.close_scene()

@@ -27,12 +27,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
 from continuum_gym.envs.info import RewardTerms
-from continuum_gym.envs.pixels import fast_render, make_observer
-from continuum_gym.envs.single import (
-    SceneOwner,
-    check_render_arguments,
-    check_reset_options,
-)
+from continuum_gym.envs.single import SceneOwner, check_reset_options
 from continuum_gym.validation import describe, integer
 
 if TYPE_CHECKING:
@@ -89,15 +84,11 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         if max_episode_steps is not None:  # else a given config's own limit stays
             kwargs["max_episode_steps"] = max_episode_steps
         self.core = self.core_class(num_envs=self.num_envs, **kwargs)
-        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
-            self.metadata, self.core, render_mode, camera, pixel_occlusion)
+        self._check_render(self.metadata, render_mode, camera, pixel_occlusion, renderer)
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode,
                          "render_fps": int(round(1.0 / self.core.control_dt))}
-        self._pixels = make_observer(self.core)  # image observations (obs_mode, envs/pixels.py), or None
-        self._fast = fast_render(self.core, renderer, self.camera)  # render() by the batched renderer, or None
-        self.single_observation_space = self.core.single_observation_space if self._pixels is None \
-            else self._pixels.space
+        self.single_observation_space = self.core.single_observation_space  # a Dict of images for an image obs_mode
         self.single_action_space = self.core.single_action_space
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
@@ -143,7 +134,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self._needs_reset = False
         reset = np.zeros(self.num_envs, dtype=bool)
         reset[rows] = True
-        return self._observe(rows), self._info(np.zeros(self.num_envs, dtype=bool), reset)
+        return self.core.observations(), self._info(np.zeros(self.num_envs, dtype=bool), reset)
 
     # ------------------------------------------------------------------ step
     def step(self, actions: npt.ArrayLike) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -163,7 +154,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         truncated[ended] = self._last_truncated[ended]
         self._last_terminated, self._last_truncated = terminated.copy(), truncated.copy()
         self._ended = terminated | truncated
-        return self._observe(), rewards, terminated, truncated, self._info(clipped)
+        return self.core.observations(), rewards, terminated, truncated, self._info(clipped)
 
     def _step_next(self, ended, rewards, terminated, truncated, clipped):
         resetting = np.flatnonzero(ended)
@@ -174,31 +165,23 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
             terminated[resetting] = False
             truncated[resetting] = False
         self._ended = terminated | truncated
-        return self._observe(), rewards, terminated, truncated, self._info(clipped)
+        return self.core.observations(), rewards, terminated, truncated, self._info(clipped)
 
     def _step_same(self, rewards, terminated, truncated, clipped):
         ended = terminated | truncated
-        obs = self._observe()
+        obs = self.core.observations()
         if not ended.any():
             return obs, rewards, terminated, truncated, self._info(clipped)
         final_info = self._info(clipped, ended)
         final_obs = np.empty(self.num_envs, dtype=object)
         for row in np.flatnonzero(ended):
-            final_obs[row] = obs[row].copy() if self._pixels is None else {k: v[row].copy() for k, v in obs.items()}
+            final_obs[row] = self.core.observation(row)
         resetting = np.flatnonzero(ended)
         ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in resetting], dtype=np.int64)
         self.core.reset_rows(resetting, ids)
         info = self._info(clipped)
         info.update(final_obs=final_obs, _final_obs=ended.copy(), final_info=final_info, _final_info=ended.copy())
-        return self._observe(resetting), rewards, terminated, truncated, info
-
-    def _observe(self, rows: np.ndarray | None = None) -> Any:
-        """The state batch, or the images of ``obs_mode`` of every row (``rows``: only those changed since the
-        last call), fresh arrays either way."""
-        if self._pixels is None:
-            return self.core.obs.astype(np.float32)
-        self._pixels.update(rows)
-        return self._pixels.observations()
+        return self.core.observations(), rewards, terminated, truncated, info
 
     def _info(self, clipped: np.ndarray, mask: np.ndarray | None = None) -> dict:
         info = dict(self.core.info())
@@ -207,8 +190,6 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         if self._pixel_occlusion:
             scene = self.scene()
             info["pixel_occlusion"] = np.array([self.core.pixel_occlusion(row, scene) for row in range(self.num_envs)])
-        if self._pixels is not None:
-            info.update(self._pixels.info())
         mask = np.ones(self.num_envs, dtype=bool) if mask is None else mask
         for key in list(info):
             info[f"_{key}"] = mask
@@ -220,10 +201,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make_vec()")
             return None
-        if self._fast is not None:  # one call for every row
-            return tuple(self._fast.images())
-        scene = self.scene()
-        return tuple(self.core.render_row(row, scene, self.camera) for row in range(self.num_envs))
+        return tuple(self.images(range(self.num_envs)))
 
     def close_extras(self, **kwargs: Any) -> None:
         self.close_scene()

@@ -75,9 +75,6 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     spec = core.spec
     observer = _observer(core, pixel_metrics)
     core.reset_rows(np.arange(n), task_ids)
-    if observer is not None:
-        observer.update()
-    images = observer is not None and observer.obs_mode != "state"
     active = np.ones(n, dtype=np.uint8)
     faulted = core.non_finite().copy()  # rows with a value that is not finite (on_non_finite="truncate")
     sums: dict = {}
@@ -88,7 +85,7 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     clipped = np.zeros(n)
     action_dim = core.single_action_space.shape[0]
     while active.any():
-        observation = observer.observations(copy=False) if images else core.obs.astype(np.float32)
+        observation = core.observations(copy=False)  # the images of an image obs_mode (core.pixels), or the state
         actions = predictor.act(observation, action_dim)
         outside = np.abs(actions) > 1.0
         clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]
@@ -97,8 +94,9 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
         alive = active.astype(bool)
         values = core.step_values()
         if observer is not None:
-            observer.update()
-            values.update(observer.metrics)
+            if observer is not core.pixels:  # the metrics' own observer: the core marks only its own
+                observer.stale(alive)
+            values.update(observer.info())
         for key, value in values.items():
             sums.setdefault(key, np.zeros(n))[alive] += value[alive]
             finals.setdefault(key, np.zeros(n))[alive] = value[alive]
@@ -134,10 +132,10 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
 
 
 def _observer(core: BatchedCore, pixel_metrics: bool) -> Any:
-    """The core's image observer: for an image ``obs_mode`` or when the pixel metrics are asked for, else None."""
+    """What measures the pixel metrics: the core's own observer (an image ``obs_mode``), one that renders only what
+    the metrics need (``pixel_metrics`` of a state core), else None."""
     from continuum_gym.envs.pixels import PixelObserver
 
-    mode = getattr(core.config, "obs_mode", "state")
-    if mode == "state" and not pixel_metrics:
-        return None
+    if core.pixels is not None or not pixel_metrics:
+        return core.pixels
     return PixelObserver(core)

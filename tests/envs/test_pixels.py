@@ -143,8 +143,8 @@ def test_occlusion_metric_equals_a_numpy_count_over_the_circular_field_of_view()
     env = make(OCC, image_size=48)
     obs, info = steps(env, 3)
     core = env.unwrapped.core
-    cameras = env.unwrapped._pixels.renderer.render(
-        env.unwrapped._pixels.spec.scene(core, np.arange(1), 48, 48), "endoscope", ("segmentation",)).cameras
+    cameras = env.unwrapped.core.pixels.renderer.render(
+        env.unwrapped.core.pixels.spec.scene(core, np.arange(1), 48, 48), "endoscope", ("segmentation",)).cameras
     inside = cameras.fov_mask(core.config.cone.beta)[0]
     seg = obs["segmentation"][..., 0]
     expected = np.count_nonzero((seg >= 1) & (seg <= core.config.robot.n_segments) & inside) / np.count_nonzero(inside)
@@ -243,7 +243,7 @@ def test_vector_env_rows_equal_single_envs_and_partial_resets_render_their_rows(
     mask = np.array([False, True, False])
     reset_obs, _ = vec.reset(options={"reset_mask": mask})
     np.testing.assert_array_equal(reset_obs["rgb"][0], obs["rgb"][0])  # rows not reset keep their images
-    pixels = vec.unwrapped._pixels
+    pixels = vec.unwrapped.core.pixels
     whole = pixels.renderer.render(pixels.spec.scene(vec.unwrapped.core, np.arange(3), SIZE, SIZE), "endoscope",
                                    ("rgb",)).rgb
     np.testing.assert_array_equal(reset_obs["rgb"], whole)
@@ -257,7 +257,7 @@ def test_vector_env_same_step_autoreset_keeps_the_final_images():
     obs, _, _, truncated, info = vec.step(np.zeros((2, 8), dtype=np.float32))
     assert truncated.all() and set(info["final_obs"][0]) == {"rgb", "state"}
     assert not np.array_equal(info["final_obs"][0]["rgb"], obs["rgb"][0])  # the last frame, then the new start
-    pixels = vec.unwrapped._pixels
+    pixels = vec.unwrapped.core.pixels
     whole = pixels.renderer.render(pixels.spec.scene(vec.unwrapped.core, np.arange(2), SIZE, SIZE), "endoscope",
                                    ("rgb",)).rgb
     np.testing.assert_array_equal(obs["rgb"], whole)  # the new episodes' first images
