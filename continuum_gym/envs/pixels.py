@@ -13,8 +13,8 @@ The layer reads the core only through what every core keeps: ``num_envs``, ``con
 ``sensed_joints()``, ``base_cmd``, ``steps``, ``control_dt``, ``spec.env_id`` and the env-specific state its
 ``PixelSpec`` names (``gamma``, ``davinci_configuration(row)``). What differs per environment (the scene, the
 views, the ``state`` entry, the pixel metric) is a ``PixelSpec`` in the env's package (``envs/occlusion/pixels.py``,
-``envs/view_tracking/pixels.py``), registered by name with ``register_pixels`` so that nothing compiled is
-imported until an image mode is used.
+``envs/view_tracking/pixels.py``), named by the env's ``EnvSpec`` (``pixels="module:NAME"``, which ``register_env``
+passes to ``register_pixels``) so that nothing compiled is imported until an image mode is used.
 
 Vocabulary (ManiSkill's): ``obs_mode`` is ``"state"`` (the flat ``Box`` the env always had, bit for bit),
 ``"rgb"``, ``"depth"``, ``"segmentation"``, ``"rgbd"`` or ``"rgb+depth+segmentation"``; ``image_size`` is an int
@@ -90,7 +90,8 @@ class PixelSpec:
     episode_metrics: tuple[EpisodeMetric, ...] = ()
 
 
-#: env id -> "module:NAME" of its ``PixelSpec`` (filled by each env package on import, loaded on first use).
+#: env id -> "module:NAME" of its ``PixelSpec`` (filled by ``register_env`` from ``EnvSpec.pixels``, or by
+#: ``register_pixels``; loaded on first use).
 PIXEL_SPECS: dict[str, str | PixelSpec] = {}
 
 
@@ -105,8 +106,8 @@ def pixel_spec(env_id: str) -> PixelSpec:
 
     entry = PIXEL_SPECS.get(env_id)
     if entry is None:
-        raise ValueError(f"obs_mode: {env_id} has no image observations (only 'state'); environments with images: "
-                         f"{sorted(PIXEL_SPECS)}")
+        raise ValueError(f"obs_mode: {env_id} has no image observations (only 'state': its EnvSpec names no pixels); "
+                         f"environments with images: {sorted(PIXEL_SPECS)}")
     if isinstance(entry, str):
         entry = PIXEL_SPECS[env_id] = load_object(entry)
     assert isinstance(entry, PixelSpec), f"{env_id}'s pixel spec is not a PixelSpec"

@@ -81,6 +81,19 @@ def test_state_mode_is_the_flat_box_unchanged():
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(b, state.unwrapped.core.obs[0].astype(np.float32))
     assert "image_occlusion" not in info_b
+    assert state.unwrapped.core.pixels is None  # nothing renders
+
+
+def test_the_env_spec_names_the_pixel_spec_and_an_env_without_one_refuses_images(monkeypatch):
+    from continuum_gym.envs.pixels import PIXEL_SPECS, pixel_spec
+    from continuum_gym.envs.spec import get_spec
+
+    for env_id in (OCC, VIEW):
+        assert pixel_spec(env_id).env_id == env_id and PIXEL_SPECS[env_id] is pixel_spec(get_spec(env_id).env_id)
+        assert get_spec(env_id).pixels.endswith(".pixels:PIXELS")
+    monkeypatch.delitem(PIXEL_SPECS, OCC)
+    with pytest.raises(ValueError, match="has no image observations"):
+        gym.make(OCC, obs_mode="rgb")
 
 
 @pytest.mark.parametrize("value, message", [
@@ -247,6 +260,25 @@ def test_vector_env_rows_equal_single_envs_and_partial_resets_render_their_rows(
     whole = pixels.renderer.render(pixels.spec.scene(vec.unwrapped.core, np.arange(3), SIZE, SIZE), "endoscope",
                                    ("rgb",)).rgb
     np.testing.assert_array_equal(reset_obs["rgb"], whole)
+
+
+def test_the_core_renders_each_row_a_step_or_reset_changed_once(monkeypatch):
+    vec = gym.make_vec(OCC, num_envs=3, vectorization_mode="vector_entry_point", obs_mode="rgb", image_size=SIZE,
+                       autoreset_mode="disabled")
+    pixels = vec.unwrapped.core.pixels
+    rendered = []
+    update = pixels.update
+
+    def counted(rows=None):
+        rendered.append(None if rows is None else np.asarray(rows).tolist())
+        update(rows)
+
+    monkeypatch.setattr(pixels, "update", counted)
+    vec.reset(seed=0)
+    vec.step(np.zeros((3, 8), dtype=np.float32))
+    assert rendered == [None, None]  # every row once per reset and per step: the observation and info share it
+    vec.reset(options={"reset_mask": np.array([False, True, False])})
+    assert rendered[2:] == [[1]]  # a partial reset renders its rows only
 
 
 def test_vector_env_same_step_autoreset_keeps_the_final_images():

@@ -8,7 +8,6 @@ and ``spec`` (what the rest of the library reads about it, registered when this 
 first use, so importing the package registers the id without compiling anything.
 """
 
-from continuum_gym.envs.pixels import register_pixels
 from continuum_gym.envs.view_tracking.benchmark import BENCHMARK
 from continuum_gym.envs.view_tracking.spec import SPEC
 from continuum_gym.plugins import lazy_exports
@@ -22,6 +21,3 @@ _EXPORTS = {
 __all__ = ["SPEC", "BENCHMARK", *sorted(_EXPORTS)]
 
 __getattr__ = lazy_exports(__name__, _EXPORTS)
-
-# image observations (issue 56): loaded when an image obs_mode is first used
-register_pixels(SPEC.env_id, "continuum_gym.envs.view_tracking.pixels:PIXELS")
