@@ -293,6 +293,11 @@ def test_vector_env_same_step_autoreset_keeps_the_final_images():
     whole = pixels.renderer.render(pixels.spec.scene(vec.unwrapped.core, np.arange(2), SIZE, SIZE), "endoscope",
                                    ("rgb",)).rgb
     np.testing.assert_array_equal(obs["rgb"], whole)  # the new episodes' first images
+    # info is the new episodes' (their first images' pixel metric), final_info the last step's, as for every entry
+    from continuum_gym.envs.pixels import PixelObserver
+
+    np.testing.assert_array_equal(info["image_occlusion"], PixelObserver(vec.unwrapped.core).info()["image_occlusion"])
+    assert not np.array_equal(info["final_info"]["image_occlusion"], info["image_occlusion"])
 
 
 def test_sb3_adapter_gives_dict_batches_and_terminal_images():
