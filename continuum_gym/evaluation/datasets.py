@@ -135,9 +135,14 @@ def dataset_env_kwargs(controller: str, split: str, env_kwargs: dict | None = No
     return {**(env_kwargs or {}), "base_controller": controller, "task_split": split}
 
 
+#: ``info`` keys a wrapper adds on an episode's last step only: rl_zoo3, once imported, patches Gymnasium's
+#: ``TimeLimit`` (``gym.make(..., max_episode_steps=...)``) to add this one; the truncations record it already.
+_LAST_STEP_KEYS = ("TimeLimit.truncated",)
+
+
 def _storable(info: dict) -> dict:
     # Same keys every step (Minari needs it); plain float64 arrays (reward_terms is an ndarray subclass).
-    return {key: np.asarray(value).view(np.ndarray) for key, value in info.items()}
+    return {key: np.asarray(value).view(np.ndarray) for key, value in info.items() if key not in _LAST_STEP_KEYS}
 
 
 def create_dataset(env_id: str, controller: str, *, split: str = "train", episodes: int = 10,
