@@ -124,6 +124,10 @@ def algo_value(key: str, value: Any) -> Any:
         return linear_schedule(value, key)
     if key == "train_freq" and isinstance(value, list):
         return tuple(value)
+    if key == "policy_kwargs" and isinstance(value, dict) and isinstance(value.get("features_extractor_class"), str):
+        from continuum_gym.plugins import load_object  # YAML names the class "module:Class" (pixel policies)
+
+        return {**value, "features_extractor_class": load_object(value["features_extractor_class"])}
     return value
 
 

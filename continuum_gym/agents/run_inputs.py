@@ -369,9 +369,19 @@ def output_directory(name: str, out: Path | str) -> Path:
     return path
 
 
+def hyperparams_file(path: Path | str) -> Path:
+    """``path``, or the packaged file of that bare name (``ppo_pixels.yml``) when no such file is here."""
+    path = Path(path)
+    if not path.exists() and path.name == str(path) and (HYPERPARAMS_DIR / path.name).is_file():
+        return HYPERPARAMS_DIR / path.name
+    return path
+
+
 def load_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
-    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``."""
-    path = Path(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
+    """The block for ``env_id`` in ``<algo>.yml`` (anchors resolved), unchecked; a bad file raises ``ValueError``.
+
+    ``path`` names another file, or a packaged one by its bare name (``ppo_pixels.yml``)."""
+    path = hyperparams_file(path) if path else HYPERPARAMS_DIR / f"{algo}.yml"
     if not path.is_file():
         raise ValueError(f"--hyperparams: no file {str(path)!r}" + (" (it is a directory)" if path.is_dir() else ""))
     try:

@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 
 from continuum_gym.agents.cluster import connect
-from continuum_gym.agents.run_inputs import output_directory, seed_number, whole_number
+from continuum_gym.agents.run_inputs import hyperparams_file, output_directory, seed_number, whole_number
 from continuum_gym.agents.train import (
     ALGOS,
     check_steps,
@@ -125,7 +125,8 @@ def run_trial(config: dict[str, Any], env_id: str, algo: str, base: str | None, 
     block.update(overrides)
     hyperparams = trial_dir / "hyperparams.yml"
     write_text_atomic(hyperparams, yaml.safe_dump({env_id: block}, sort_keys=False))
-    run_dir = trial_dir / run_name(env_id, algo, base, int(config["seed"]), block.get("helpers") or ())
+    run_dir = trial_dir / run_name(env_id, algo, base, int(config["seed"]), block.get("helpers") or (),
+                                   (block.get("env_kwargs") or {}).get("obs_mode"))
     if (run_dir / "model.zip").exists():
         return run_dir  # finished before an interruption
     # A retried trial continues from its newest intact checkpoint, or starts again if it had none.
@@ -212,7 +213,7 @@ def sweep(env_id: str, algo: str, base: str | None, seeds: Sequence[int], steps:
     experiment = sweep_dir / "tune"
     if sweep_dir.exists() and any(sweep_dir.iterdir()) and not resume:
         raise FileExistsError(f"{sweep_dir} exists; pass --resume to continue it (nothing is overwritten)")
-    hp_file = Path(hyperparams).resolve() if hyperparams else None
+    hp_file = hyperparams_file(hyperparams).resolve() if hyperparams else None
     metric = headline_metric(env_id)
     mode = "max" if get_spec(env_id).metric(metric).higher_is_better else "min"
     connect(address or os.environ.get("RAY_ADDRESS") or None, trial_runtime_env())

@@ -66,12 +66,15 @@ class RunBusyError(RuntimeError):
     """Another process is training the same run directory."""
 
 
-def run_name(env_id: str, algo: str, base: str | None, seed: int, helpers: list | tuple = ()) -> str:
-    """``<Env>_<algo>_<base>[+<helper>...]_seed<n>``: the run's folder, which says what acts."""
+def run_name(env_id: str, algo: str, base: str | None, seed: int, helpers: list | tuple = (),
+             obs_mode: str | None = None) -> str:
+    """``<Env>_<algo>_<base>[_<obs_mode>][+<helper>...]_seed<n>``: the run's folder, which says what acts and what
+    the policy sees (``OcclusionAvoidance_ppo_projected_gradient_rgbd_seed0``; ``+`` of a mode written ``_``)."""
     from continuum_gym.envs.helpers import row_name
 
     short = env_id.split("/")[-1].split("-")[0]
-    return f"{short}_{algo}_{row_name(base or 'pure_rl', helpers)}_seed{seed}"
+    mode = "" if obs_mode in (None, "state") else f"_{str(obs_mode).replace('+', '_')}"
+    return f"{short}_{algo}_{row_name((base or 'pure_rl') + mode, helpers)}_seed{seed}"
 
 
 def resolve_hyperparams(algo: str, env_id: str, path: Path | str | None = None) -> dict:
@@ -254,7 +257,8 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
         helpers = list(check_helpers(env_id, hp.get("helpers")))
     except ValueError as error:
         raise ValueError(f"{source}: {error}") from None
-    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed, helpers)
+    run_dir = output_directory("out", out) / run_name(env_id, algo, base, seed, helpers,
+                                                      (hp.get("env_kwargs") or {}).get("obs_mode"))
     if run_dir.exists() and not run_dir.is_dir():
         raise ValueError(f"out: {run_dir} is an existing file, not a run directory")
     run = {**RUN_DEFAULTS, **hp}
@@ -269,6 +273,10 @@ def train(env_id: str, algo: str = "ppo", base: str | None = "__default__", seed
 
     threads = learner_threads()
     env_kwargs = dict(run["env_kwargs"] or {})
+    if env_kwargs.get("obs_mode", "state") != "state":  # image batches: no page faults per step (allocator.py)
+        from continuum_gym.agents.allocator import keep_large_blocks
+
+        threads["large_blocks_kept"] = keep_large_blocks()
     env_kwargs.update(base_controller=base, residual_scale=float(run["residual_scale"]))
     try:  # the environment checks its own keywords; still nothing written
         venv = ContinuumSB3VecEnv(env_id, n, seed=seed, task_split="train", helpers=helpers, **env_kwargs)

@@ -22,6 +22,7 @@ from continuum_gym.envs.common_kernels import task_arrays
 from continuum_gym.envs.core import STANDARD_ARRAYS
 from continuum_gym.envs.declared import info_fields, step_values
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
+from continuum_gym.envs.pixels import make_observer
 from continuum_gym.envs.row_claims import KernelCall
 from continuum_gym.robots.compiled import kernel
 from continuum_gym.validation import integer
@@ -31,6 +32,7 @@ if TYPE_CHECKING:
     from continuum_gym.envs.config import EnvConfig
     from continuum_gym.envs.core import RowFunctions
     from continuum_gym.envs.model_error import MismatchState
+    from continuum_gym.envs.pixels import PixelObserver
     from continuum_gym.envs.tasks import TaskBatch
 
 #: Every observation entry is clipped to +-OBS_LIMIT (the observation space's bounds).
@@ -145,8 +147,11 @@ class BatchedCore:
     config: EnvConfig  #: the validated configuration the core was built from
     num_envs: int
     dof: int  #: joints per row: the width of joint bit flags (``info["clamped_joints"]``) and of ``q``
-    single_observation_space: spaces.Box
+    #: one row's observation: the state ``Box`` of ``obs``, or the ``Dict`` of an image ``obs_mode`` (``pixels``)
+    single_observation_space: spaces.Space
     single_action_space: spaces.Box
+    #: the image observations of ``config.obs_mode`` (``envs/pixels.py``), or None (``"state"``: ``obs`` is observed)
+    pixels: PixelObserver | None = None
     task_count: int
     q: np.ndarray  # (N, dof) joints
     steps: np.ndarray  # (N,) int64 control steps since reset
@@ -211,6 +216,9 @@ class BatchedCore:
                                    for name in rows.outputs._fields))
         self._model, self._params = built.model, built.params
         self.layers = tuple(layer(self) for layer in built.layers)
+        self.pixels = make_observer(self)
+        if self.pixels is not None:
+            self.single_observation_space = self.pixels.space
 
     def __getattr__(self, name: str) -> Any:
         # the env's own objects (its built-in controller, cameras, limits, ...) read as core.<name>
@@ -243,8 +251,22 @@ class BatchedCore:
         return integer(num_envs, "num_envs", low=1)
 
     def info(self) -> dict:
-        """Every ``info`` entry for the whole batch: {name: (N, ...) array}."""
-        return info_batch(self.info_fields, self)
+        """Every ``info`` entry for the whole batch: {name: (N, ...) array} (with an image ``obs_mode``, the pixel
+        metrics too)."""
+        info = info_batch(self.info_fields, self)
+        if self.pixels is not None:
+            info.update(self.pixels.info())
+        return info
+
+    def observations(self, copy: bool = True) -> np.ndarray | dict:
+        """Every row's observation, as the front ends return it: ``obs`` as float32 (N, obs_dim), or the images of
+        ``obs_mode`` and the measured ``state`` {key: (N, ...)}, rendered from the rows changed since the last read
+        (``copy=False``: the image buffers themselves, valid until the next step or reset)."""
+        return self.obs.astype(np.float32) if self.pixels is None else self.pixels.observations(copy)
+
+    def observation(self, row: int) -> np.ndarray | dict:
+        """One row's observation (fresh arrays): what ``observations()`` holds at ``row``."""
+        return self.obs[row].astype(np.float32) if self.pixels is None else self.pixels.observation(row)
 
     # the written-out reader of info_fields, found on the first info_row
     _info_row_reader: Callable[..., dict] | None = None
@@ -254,7 +276,10 @@ class BatchedCore:
         reader = self._info_row_reader
         if reader is None:
             reader = self._info_row_reader = row_reader(self.info_fields, self)
-        return reader(self, row)
+        info = reader(self, row)
+        if self.pixels is not None:
+            info.update(self.pixels.info_row(row))
+        return info
 
     def step_values(self) -> dict:
         """Per-step values {name: (N,) array} the evaluation reduces to episode metrics (the declared columns')."""
@@ -275,6 +300,8 @@ class BatchedCore:
         self.observe_rows(rows)
         for layer in self.layers:
             layer.reset_rows(rows)
+        if self.pixels is not None:  # rendered when next observed
+            self.pixels.stale(rows)
 
     def step(self, actions: np.ndarray, active: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Step the rows whose ``active`` (N,) uint8 is 1 (0 leaves a row as it is) by ``actions`` (N, k).
@@ -282,6 +309,8 @@ class BatchedCore:
         Returns (rewards, terminated, truncated) arrays and fills ``self.obs``. The value 2
         (``OBSERVE_ONLY``) is reserved for ``observe_rows``: such a row is observed, not stepped.
         """
+        if self.pixels is not None:  # the rows stepped are rendered when next observed
+            self.pixels.stale(active != 0)
         if self.layers:  # Python layers around the compiled step (``Built.layers``)
             return self._step_layered(actions, active)
         return self._step_rows(actions, active)

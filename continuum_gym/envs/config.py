@@ -109,6 +109,15 @@ class EnvConfig:
             "`info['non_finite']` True and NaN metrics (never a score; `evaluate` refuses such episodes)",
         type_name="str"))
 
+    #: What the env observes (issue 56, ``envs/pixels.py``): fields of every env, read by the front ends, never by
+    #: the core, so that a run's ``config.yml`` and ``save_config`` rebuild a pixel policy's env.
+    obs_mode: str = field(default="state", kw_only=True, metadata=spec(
+        doc="the observation: `state` (the flat Box), or a Dict of images and the measured `state`: `rgb`, `depth`, "
+            "`segmentation`, `rgbd`, `rgb+depth+segmentation` (docs/rendering.md)", type_name="str"))
+    image_size: Any = field(default=64, kw_only=True, metadata=spec(
+        unit="pixels", doc="side of a square image, or (H, W); each in [16, 512] (image modes only)",
+        type_name="int or (int, int)"))
+
     if TYPE_CHECKING:  # fields every subclass defines (declared for mypy only: here they would be fields)
         task: Any  # a task family's name, recorded trajectories or a TaskSource
         task_split: str
@@ -277,6 +286,10 @@ def check_common(config: EnvConfig) -> None:
 
     set_ = object.__setattr__
     choice(config.on_non_finite, ON_NON_FINITE, "on_non_finite")
+    from continuum_gym.envs.obs_modes import check_image_size, check_obs_mode
+
+    check_obs_mode(config.obs_mode)
+    set_(config, "image_size", check_image_size(config.image_size))
     tasks, test_only = config.builtin_tasks, config.test_only_tasks
     if isinstance(config.task, str) and config.task not in tasks and (
             ":" in config.task or config.task in registered.TASKS[config.env_id]):

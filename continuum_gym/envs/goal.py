@@ -78,7 +78,12 @@ class ContinuumGoalEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = self.base.metadata
         goal_space = spaces.Box(-np.inf, np.inf, (self.goal_dim,), dtype=np.float64)
-        self.observation_space = spaces.Dict({"observation": self.base.observation_space,
+        base_space = self.base.observation_space
+        # an image obs_mode (envs/pixels.py): the images beside the goals, the measured state as "observation"
+        # (one flat Dict: SB3's HER buffer takes no nested spaces)
+        images = dict(base_space.spaces) if isinstance(base_space, spaces.Dict) else {}
+        observed = images.pop("state") if images else base_space
+        self.observation_space = spaces.Dict({"observation": observed, **images,
                                               "achieved_goal": goal_space, "desired_goal": goal_space})
         self.action_space = self.base.action_space
 
@@ -98,8 +103,11 @@ class ContinuumGoalEnv(gym.Env):
         """The base env's ``EnvConfig`` (``continuum_gym.save_config`` writes it)."""
         return self.base.core.config
 
-    def _observation(self, observation: np.ndarray, info: dict) -> dict:
+    def _observation(self, observation: Any, info: dict) -> dict:
         achieved, desired = self.goals(info)
+        if isinstance(observation, dict):  # images and the measured state
+            images = {key: value for key, value in observation.items() if key != "state"}
+            return {"observation": observation["state"], **images, "achieved_goal": achieved, "desired_goal": desired}
         return {"observation": observation, "achieved_goal": achieved, "desired_goal": desired}
 
     def goals(self, info: dict) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - interface

@@ -17,7 +17,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from continuum_gym.envs.batched import check_actions
-from continuum_gym.envs.single import CoreOwner
+from continuum_gym.envs.single import SceneOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
 from continuum_gym.envs.vector import row_generators
 from continuum_gym.validation import integer
@@ -30,7 +30,6 @@ if TYPE_CHECKING:
     from gymnasium.envs.registration import EnvSpec as GymEnvSpec
     from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvObs, VecEnvStepReturn
 
-    from continuum_gym.envs.batched import RowScene
 
 
 def core_class(env_id: str) -> type:
@@ -38,7 +37,7 @@ def core_class(env_id: str) -> type:
     return get_spec(env_id).core_class()
 
 
-class ContinuumSB3VecEnv(CoreOwner, VecEnv):
+class ContinuumSB3VecEnv(SceneOwner, VecEnv):
     """N environments of ``env_id`` in one process, stepped by one compiled call.
 
     Each row's ``info`` holds what ``DummyVecEnv`` over ``gym.make(env_id)`` wrapped in SB3's
@@ -55,6 +54,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         camera: the camera those images are taken from.
         helpers: names of the env's helpers that act on the (clipped) actions before each step
             (``envs/helpers.py``), as ``train``'s ``helpers`` key and ``evaluate`` apply them.
+        renderer: ``"pybullet"`` (default) or ``"fast"`` (the batched renderer: endoscope cameras only).
         **kwargs: the environment's keyword arguments (task, task_split, base_controller, ...).
     """
 
@@ -62,9 +62,8 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
     metadata: dict[str, Any]
 
     def __init__(self, env_id: str, num_envs: int, seed: Any = None, render_mode: str | None = None,
-                 camera: str = "external", helpers: Any = (), **kwargs: Any) -> None:
+                 camera: str = "external", renderer: str = "pybullet", helpers: Any = (), **kwargs: Any) -> None:
         from continuum_gym.envs.helpers import check_helpers, make_helpers
-        from continuum_gym.envs.single import check_render_arguments
 
         self.env_id = env_id
         self.env_kwargs = {**registered_kwargs(env_id), **kwargs}
@@ -73,14 +72,13 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.core = core_class(env_id)(num_envs=num_envs, **self.env_kwargs)
         self._helpers = make_helpers(env_id, self.helper_names, self.core.config)
         self._all_rows = np.ones(num_envs, dtype=np.uint8)
-        self.render_mode, self.camera, _ = check_render_arguments({"render_modes": ["rgb_array"]}, self.core,
-                                                                  render_mode, camera, False)
+        self._check_render({"render_modes": ["rgb_array"]}, render_mode, camera, False, renderer)
+        # the core's observation space: a Dict of images for an image obs_mode
         super().__init__(num_envs, self.core.single_observation_space, self.core.single_action_space)
         self.spec = _gym_spec(env_id)
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._rngs = row_generators(seed, num_envs)
         self._actions: npt.ArrayLike | None = None
-        self._scene: RowScene | None = None
         self._returns = np.zeros(num_envs)
         self._lengths = np.zeros(num_envs, dtype=np.int64)
         self._started = time.time()
@@ -94,7 +92,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self.core.reset_rows(np.arange(self.num_envs), ids)
         self._returns[:] = 0.0
         self._lengths[:] = 0
-        return self.core.obs.astype(np.float32)
+        return self.core.observations()
 
     def step_async(self, actions: np.ndarray) -> None:
         shape = (self.num_envs,) + self.action_space.shape
@@ -116,7 +114,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         self._lengths += 1
         rewards = rewards.astype(np.float32)
         dones = terminated | truncated
-        obs = self.core.obs.astype(np.float32)
+        obs = self.core.observations()
         batch = dict(self.core.info())
         batch["reward_terms"] = self.core.reward_terms()
         batch["action_clipped"] = clipped
@@ -124,7 +122,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         for i in range(self.num_envs):
             info = {key: value[i].copy() if value.ndim > 1 else value[i] for key, value in batch.items()}
             if dones[i]:
-                info["terminal_observation"] = obs[i].copy()
+                info["terminal_observation"] = self.core.observation(i)
                 info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
                 info["episode"] = {"r": float(self._returns[i]), "l": int(self._lengths[i]),
                                    "t": round(time.time() - self._started, 6)}
@@ -133,15 +131,13 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         if len(finished):
             ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in finished])
             self.core.reset_rows(finished, ids)
-            obs[finished] = self.core.obs[finished]
+            obs = self.core.observations()
             self._returns[finished] = 0.0
             self._lengths[finished] = 0
         return obs, rewards, dones, infos
 
     def close(self) -> None:
-        if self._scene is not None:
-            self._scene.close()
-            self._scene = None
+        self.close_scene()
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         owner = self.core if hasattr(self.core, attr_name) else self
@@ -183,9 +179,7 @@ class ContinuumSB3VecEnv(CoreOwner, VecEnv):
         """One RGB image per row (``render_mode="rgb_array"``), else Nones."""
         if self.render_mode is None:
             return [None] * self.num_envs
-        if self._scene is None:
-            self._scene = self.core.make_scene()
-        return [self.core.render_row(row, self._scene, self.camera) for row in range(self.num_envs)]
+        return self.images(range(self.num_envs))
 
 
 def _gym_spec(env_id: str) -> GymEnvSpec | None:

@@ -13,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.envs.pixels import fast_render
 from continuum_gym.validation import boolean, choice
 
 if TYPE_CHECKING:
@@ -21,6 +22,7 @@ if TYPE_CHECKING:
 
     from continuum_gym.envs.batched import RowScene
     from continuum_gym.envs.config import EnvConfig
+    from continuum_gym.envs.pixels import FastRender
 
 #: Keys ``reset(options=...)`` understands.
 RESET_OPTIONS = ("task_id",)
@@ -72,9 +74,28 @@ class CoreOwner:
 
 
 class SceneOwner(CoreOwner):
-    """The pybullet scene of an env's core: built on first use, released by ``close_scene()``, never pickled."""
+    """What draws ``render()``: the pybullet scene of an env's core (built on first use, released by
+    ``close_scene()``, never pickled) or, with ``renderer="fast"``, the batched renderer (``envs/pixels.py``)."""
 
     _scene: RowScene | None = None
+    _fast: FastRender | None = None
+    render_mode: str | None
+    camera: str
+    _pixel_occlusion: bool
+
+    def _check_render(self, metadata: dict, render_mode: Any, camera: Any, pixel_occlusion: Any,
+                      renderer: Any) -> None:
+        """Set ``render_mode``, ``camera``, the pixel occlusion and the renderer from the front end's keywords."""
+        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
+            metadata, self.core, render_mode, camera, pixel_occlusion)
+        self._fast = fast_render(self.core, renderer, self.camera)  # the batched renderer, or None: pybullet
+
+    def images(self, rows: Any) -> list[np.ndarray]:
+        """RGB images of ``rows`` through ``camera``: the batched renderer's (one call) or the pybullet scene's."""
+        if self._fast is not None:
+            return list(self._fast.images(rows))
+        scene = self.scene()
+        return [self.core.render_row(row, scene, self.camera) for row in rows]
 
     def scene(self) -> RowScene:
         """The pybullet scene that renders this env's rows (built on first use; ``close()`` releases it)."""
@@ -101,18 +122,17 @@ class ContinuumEnv(SceneOwner, gym.Env):
     action_space: spaces.Box  # the core's single_action_space
 
     def __init__(self, render_mode: str | None = None, camera: str = "external", pixel_occlusion: bool = False,
-                 **kwargs: Any) -> None:
+                 renderer: str = "pybullet", **kwargs: Any) -> None:
         self.core = self.core_class(num_envs=1, **kwargs)
-        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
-            self.metadata, self.core, render_mode, camera, pixel_occlusion)
-        self.observation_space = self.core.single_observation_space
+        self._check_render(self.metadata, render_mode, camera, pixel_occlusion, renderer)
+        self.observation_space = self.core.single_observation_space  # a Dict of images for an image obs_mode
         self.action_space = self.core.single_action_space
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.core.control_dt))}
         self._scene = None
         self._needs_reset = True
         self._active = np.ones(1, dtype=np.uint8)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[Any, dict]:
         super().reset(seed=seed)
         options = check_reset_options(options, RESET_OPTIONS)
         task_id = options.get("task_id")
@@ -120,15 +140,15 @@ class ContinuumEnv(SceneOwner, gym.Env):
             task_id = self.core.sample_task_id(self.np_random)
         self.core.reset_rows(np.array([0]), self.core.check_task_ids(task_id, 1, "options['task_id']"))
         self._needs_reset = False
-        return self.core.obs[0].astype(np.float32), self._info(clipped=False)
+        return self.core.observation(0), self._info(clipped=False)
 
-    def step(self, action: npt.ArrayLike) -> tuple[np.ndarray, float, bool, bool, dict]:
+    def step(self, action: npt.ArrayLike) -> tuple[Any, float, bool, bool, dict]:
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step(): the episode has ended or never started")
         action, clipped = check_actions(action, self.action_space.shape)
         rewards, terminated, truncated = self.core.step(action, self._active)
         self._needs_reset = bool(terminated[0] or truncated[0])
-        return (self.core.obs[0].astype(np.float32), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
+        return (self.core.observation(0), float(rewards[0]), bool(terminated[0]), bool(truncated[0]),
                 self._info(clipped=bool(clipped[0])))
 
     @property
@@ -148,7 +168,7 @@ class ContinuumEnv(SceneOwner, gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make()")
             return None
-        return self.core.render_row(0, self.scene(), self.camera)
+        return self.images([0])[0]
 
     def close(self) -> None:
         self.close_scene()

@@ -5,7 +5,8 @@ first use), its front ends' entry points, its analytic baselines, the columns it
 per-episode values, the ones the evaluation's tables show (``metrics``, with their units and which direction is
 better). How the env is evaluated and reported (task sets, optimum, headroom, traces) is another declaration,
 ``continuum_gym.envs.benchmark.Benchmark``, with defaults for an env that declares none; how it is drawn
-is its pybullet scene (``scene``, named, not imported, so the environments do not depend on the renderer).
+is its pybullet scene (``scene``, named, not imported, so the environments do not depend on the renderer), and
+what it shows in an image ``obs_mode`` its ``PixelSpec`` (``pixels``, named too: ``envs/pixels.py``).
 Each environment's package registers its own spec (``envs/occlusion/spec.py``) with ``register_env``; this module
 is generic and names no environment.
 
@@ -48,6 +49,9 @@ class EnvSpec:
     #: "module:Class" of the pybullet scene that draws the env (``Scene.from_core`` / ``show_row``) and its cameras
     scene: str = ""
     cameras: tuple[str, ...] = ()
+    #: "module:NAME" of the env's ``PixelSpec`` (``envs/pixels.py``: its images for every ``obs_mode`` but "state",
+    #: loaded when one is first used); "": the env observes its state only
+    pixels: str = ""
 
     def __post_init__(self) -> None:
         if self.metrics and isinstance(self.metrics[0], str):
@@ -121,6 +125,10 @@ def register_env(spec: EnvSpec) -> EnvSpec:
     if known is not None and known != spec:
         raise ValueError(f"env id {spec.env_id!r} is already registered with another EnvSpec; pick another id")
     ENV_SPECS[spec.env_id] = spec
+    if spec.pixels:
+        from continuum_gym.envs.pixels import register_pixels
+
+        register_pixels(spec.env_id, spec.pixels)
     if spec.env_id not in registry:
         # No TimeLimit: each task truncates itself at its own duration (hold 150 steps, random 500-600,
         # circle and the case studies 1000 at the default control_dt; a recording or another control_dt

@@ -27,11 +27,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
 from continuum_gym.envs.batched import BatchedCore, check_actions
 from continuum_gym.envs.info import RewardTerms
-from continuum_gym.envs.single import (
-    SceneOwner,
-    check_render_arguments,
-    check_reset_options,
-)
+from continuum_gym.envs.single import SceneOwner, check_reset_options
 from continuum_gym.validation import describe, integer
 
 if TYPE_CHECKING:
@@ -82,17 +78,17 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
                  camera: str = "external", pixel_occlusion: bool = False,
-                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, **kwargs: Any) -> None:
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, renderer: str = "pybullet",
+                 **kwargs: Any) -> None:
         self.num_envs = integer(num_envs, "num_envs", low=1)
         if max_episode_steps is not None:  # else a given config's own limit stays
             kwargs["max_episode_steps"] = max_episode_steps
         self.core = self.core_class(num_envs=self.num_envs, **kwargs)
-        self.render_mode, self.camera, self._pixel_occlusion = check_render_arguments(
-            self.metadata, self.core, render_mode, camera, pixel_occlusion)
+        self._check_render(self.metadata, render_mode, camera, pixel_occlusion, renderer)
         self.autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode,
                          "render_fps": int(round(1.0 / self.core.control_dt))}
-        self.single_observation_space = self.core.single_observation_space
+        self.single_observation_space = self.core.single_observation_space  # a Dict of images for an image obs_mode
         self.single_action_space = self.core.single_action_space
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
@@ -104,7 +100,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self._scene = None
 
     # ------------------------------------------------------------------ reset
-    def reset(self, *, seed: Any = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+    def reset(self, *, seed: Any = None, options: dict | None = None) -> tuple[Any, dict]:
         options = check_reset_options(options, VECTOR_RESET_OPTIONS)
         mask = options.get("reset_mask")
         if mask is None:
@@ -138,10 +134,10 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         self._needs_reset = False
         reset = np.zeros(self.num_envs, dtype=bool)
         reset[rows] = True
-        return self.core.obs.astype(np.float32), self._info(np.zeros(self.num_envs, dtype=bool), reset)
+        return self.core.observations(), self._info(np.zeros(self.num_envs, dtype=bool), reset)
 
     # ------------------------------------------------------------------ step
-    def step(self, actions: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    def step(self, actions: npt.ArrayLike) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict]:
         if self._needs_reset:
             raise gym.error.ResetNeeded("call reset() before step(): the vector env has not been reset")
         actions, clipped = check_actions(actions, (self.num_envs,) + self.single_action_space.shape, "actions")
@@ -158,7 +154,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         truncated[ended] = self._last_truncated[ended]
         self._last_terminated, self._last_truncated = terminated.copy(), truncated.copy()
         self._ended = terminated | truncated
-        return self.core.obs.astype(np.float32), rewards, terminated, truncated, self._info(clipped)
+        return self.core.observations(), rewards, terminated, truncated, self._info(clipped)
 
     def _step_next(self, ended, rewards, terminated, truncated, clipped):
         resetting = np.flatnonzero(ended)
@@ -169,23 +165,23 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
             terminated[resetting] = False
             truncated[resetting] = False
         self._ended = terminated | truncated
-        return self.core.obs.astype(np.float32), rewards, terminated, truncated, self._info(clipped)
+        return self.core.observations(), rewards, terminated, truncated, self._info(clipped)
 
     def _step_same(self, rewards, terminated, truncated, clipped):
         ended = terminated | truncated
-        obs = self.core.obs.astype(np.float32)
+        obs = self.core.observations()
         if not ended.any():
             return obs, rewards, terminated, truncated, self._info(clipped)
         final_info = self._info(clipped, ended)
         final_obs = np.empty(self.num_envs, dtype=object)
         for row in np.flatnonzero(ended):
-            final_obs[row] = obs[row].copy()
+            final_obs[row] = self.core.observation(row)
         resetting = np.flatnonzero(ended)
         ids = np.array([self.core.sample_task_id(self._rngs[i]) for i in resetting], dtype=np.int64)
         self.core.reset_rows(resetting, ids)
         info = self._info(clipped)
         info.update(final_obs=final_obs, _final_obs=ended.copy(), final_info=final_info, _final_info=ended.copy())
-        return self.core.obs.astype(np.float32), rewards, terminated, truncated, info
+        return self.core.observations(), rewards, terminated, truncated, info
 
     def _info(self, clipped: np.ndarray, mask: np.ndarray | None = None) -> dict:
         info = dict(self.core.info())
@@ -205,8 +201,7 @@ class ContinuumVectorEnv(SceneOwner, VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to make_vec()")
             return None
-        scene = self.scene()
-        return tuple(self.core.render_row(row, scene, self.camera) for row in range(self.num_envs))
+        return tuple(self.images(range(self.num_envs)))
 
     def close_extras(self, **kwargs: Any) -> None:
         self.close_scene()

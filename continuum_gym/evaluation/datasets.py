@@ -44,11 +44,13 @@ NAMESPACE = "continuum-gym"
 DATASET_SPLITS = ("train", "validation", "test")
 
 
-def dataset_id(env_id: str, controller: str, split: str, noise: float = 0.0, version: int = 0) -> str:
-    """Minari id of a dataset: ``continuum-gym/<env name>/<controller>-<split>[-noise<σ>]-v<version>``
-    (σ with ``p`` for the decimal point)."""
+def dataset_id(env_id: str, controller: str, split: str, noise: float = 0.0, version: int = 0,
+               obs_mode: str = "state") -> str:
+    """Minari id of a dataset: ``continuum-gym/<env name>/<controller>-<split>[-noise<σ>][-<obs_mode>]-v<version>``
+    (σ with ``p`` for the decimal point; an image ``obs_mode`` with ``_`` for ``+``)."""
     env_name = env_id.split("/")[-1].rsplit("-v", 1)[0]
     suffix = f"-noise{noise:g}".replace(".", "p") if noise > 0 else ""  # Minari ids allow no "." in a name
+    suffix += "" if obs_mode == "state" else f"-{obs_mode.replace('+', '_')}"
     return f"{NAMESPACE}/{env_name}/{controller}-{split}{suffix}-v{version}"
 
 
@@ -133,9 +135,14 @@ def dataset_env_kwargs(controller: str, split: str, env_kwargs: dict | None = No
     return {**(env_kwargs or {}), "base_controller": controller, "task_split": split}
 
 
+#: ``info`` keys a wrapper adds on an episode's last step only: rl_zoo3, once imported, patches Gymnasium's
+#: ``TimeLimit`` (``gym.make(..., max_episode_steps=...)``) to add this one; the truncations record it already.
+_LAST_STEP_KEYS = ("TimeLimit.truncated",)
+
+
 def _storable(info: dict) -> dict:
     # Same keys every step (Minari needs it); plain float64 arrays (reward_terms is an ndarray subclass).
-    return {key: np.asarray(value).view(np.ndarray) for key, value in info.items()}
+    return {key: np.asarray(value).view(np.ndarray) for key, value in info.items() if key not in _LAST_STEP_KEYS}
 
 
 def create_dataset(env_id: str, controller: str, *, split: str = "train", episodes: int = 10,
@@ -161,7 +168,7 @@ def create_dataset(env_id: str, controller: str, *, split: str = "train", episod
         os.environ["MINARI_DATASETS_PATH"] = str(Path(root).resolve())
     import minari
 
-    name = dataset_id(env_id, controller, split, noise)
+    name = dataset_id(env_id, controller, split, noise, obs_mode=str((env_kwargs or {}).get("obs_mode", "state")))
     if name in minari.list_local_datasets():
         if not overwrite:
             raise FileExistsError(f"dataset {name} exists under {minari_root()}; pass overwrite=True (--overwrite)")
@@ -208,6 +215,15 @@ def recorded_env_spec(env_id: str, env_kwargs: dict) -> gymnasium.envs.registrat
     return dataclasses.replace(gym.spec(env_id), kwargs={"config": config, **extra})
 
 
+def observation_kwargs(obs_mode: str, image_size: int) -> dict:
+    """The env keywords of ``--obs-mode`` / ``--image-size`` (none for the state), checked."""
+    from continuum_gym.envs.pixels import check_image_size, check_obs_mode
+
+    if check_obs_mode(obs_mode) == "state":
+        return {}
+    return {"obs_mode": obs_mode, "image_size": check_image_size(image_size)}
+
+
 def minari_root() -> Path:
     """Where Minari reads and writes datasets."""
     return Path(os.environ.get("MINARI_DATASETS_PATH", Path.home() / ".minari" / "datasets"))
@@ -224,6 +240,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise", type=float, default=0.0,
                         help="std of Gaussian residuals added to the baseline, in action units (default 0)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--obs-mode", default="state", help="observation: state (default) or an image mode, e.g. "
+                                                            "rgbd (docs/rendering.md); images of --image-size")
+    parser.add_argument("--image-size", type=int, default=64, help="image side in pixels (image modes; default 64)")
     parser.add_argument("--root", default=None, help="Minari data path (default $MINARI_DATASETS_PATH "
                                                      "or ~/.minari/datasets)")
     parser.add_argument("--overwrite", action="store_true", help="replace datasets that exist")
@@ -245,13 +264,15 @@ def run(args: argparse.Namespace) -> int:
                 for split in args.split:
                     jobs.append(check_dataset_arguments(env_id, controller, split, args.episodes, args.noise,
                                                         args.seed))
+        observation_kwargs(args.obs_mode, args.image_size)
     except (ValueError, TypeError) as error:
         print(f"continuum-gym dataset: {error}", file=sys.stderr)
         return 2
     for env_id, controller, split, episodes, noise, seed in jobs:
         try:
             dataset = create_dataset(env_id, controller, split=split, episodes=episodes, noise=noise, seed=seed,
-                                     root=args.root, overwrite=args.overwrite, progress=not args.no_progress)
+                                     root=args.root, overwrite=args.overwrite, progress=not args.no_progress,
+                                     env_kwargs=observation_kwargs(args.obs_mode, args.image_size))
         except FileExistsError as error:
             print(f"continuum-gym dataset: {error}", file=sys.stderr)
             return 2

@@ -47,12 +47,14 @@ from continuum_gym.evaluation.tables import (
 
 # ---------------------------------------------------------------------- evaluation
 def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress: bool = True,
-                 env_kwargs: dict | None = None, split: str = "test", skipped: dict | None = None) -> dict:
+                 env_kwargs: dict | None = None, split: str = "test", skipped: dict | None = None,
+                 pixel_metrics: bool = False) -> dict:
     """Per method: per task set, scores (runs x episodes) of each metric, plus traces for figures.
 
     ``methods`` is [(name, [MethodRun])]; every run acts in the env built from ``env_kwargs`` (the
     protocol env: robot, limits, ...) plus its own policy keywords, on the protocol's task sets of ``split``.
     A run whose observations do not fit, or whose policy fails, is reported and recorded in ``skipped``.
+    ``pixel_metrics``: every method's episodes also measure the env's pixel metrics (rendered every step).
     """
     from tqdm.auto import tqdm
 
@@ -83,7 +85,8 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
         policy = ZeroResidual(action_dim) if run.policy is None else as_predictor(run.policy, name, run.source)
         declared = getattr(policy, "observation_shape", None)
         try:
-            if declared is not None and declared != core.single_observation_space.shape:
+            if declared is not None and declared != core.single_observation_space.shape \
+                    and core.config.obs_mode == "state":
                 built = {k: v for k, v in kwargs.items() if k not in ("task", "task_split", "grid")}
                 robot = core.config.to_dict().get("robot")
                 raise PolicyError(f"policy {name!r} expects observations of shape {declared}, the env gives "
@@ -91,7 +94,7 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
                                   f"{robot}); pass the keywords it was trained with "
                                   "(--env-kwargs, or its registered id with --import)")
             result = run_episodes(core, policy, np.arange(count), record=task_set.task == benchmark_of(spec).trace_task,
-                                  helpers=make_helpers(env_id, run.helpers, core.config))
+                                  helpers=make_helpers(env_id, run.helpers, core.config), pixel_metrics=pixel_metrics)
         except PolicyError as error:
             failed.add(name)
             skipped[f"{name}[{index}]"] = str(error)
@@ -112,12 +115,14 @@ def evaluate_env(env_id: str, methods: list, episodes: int, grid: int, progress:
 # ---------------------------------------------------------------------- API
 def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, env_kwargs: dict | None = None,
                      episodes: int = 32, grid: int = 21, split: str = "test", progress: bool = True,
-                     references: bool = True) -> tuple[dict, dict, dict]:
+                     references: bool = True, pixel_metrics: bool = False) -> tuple[dict, dict, dict]:
     """(table, results, metadata) of the baselines, the SB3 runs in ``policies`` and ``extra`` methods.
 
     ``extra`` is [(name, [MethodRun])]; ``env_kwargs`` the protocol env every method runs in (its policy
     keywords go to the ``extra`` methods only). The table has every baseline, the offline optimum of
-    this env (computed once and cached for a variant), each method and ``headroom_closed``.
+    this env (computed once and cached for a variant), each method and ``headroom_closed``; with
+    ``pixel_metrics`` also the env's pixel metric (``mean_image_occlusion``, ``mean_view_centre_error_pct``) of
+    every method beside the headline metric.
     """
     from continuum_gym.evaluation.benchmark import metadata
     from continuum_gym.evaluation.comparison import add_improvement, add_training
@@ -136,7 +141,7 @@ def evaluate_methods(env_id: str, extra: list, policies: dict | None = None, *, 
                            skipped)
     bases, ablations = beside_rows(baselines + learned)  # a learned row's base with its helpers, the row without
     methods = baselines + bases + learned + ablations
-    results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped)
+    results = evaluate_env(env_id, methods, episodes, grid, progress, environment, split, skipped, pixel_metrics)
     optimum = load_references(spec, environment, episodes, grid, split, progress=progress) if references else None
     table = aggregate(env_id, results, optimum, grid, trained_bases(methods))
     for name, runs in learned:  # which algorithm, and over how many seeds, beside a learned row's metrics
@@ -262,6 +267,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                      "plus metadata) here")
     parser.add_argument("--env", nargs="+", default=None, help="environment ids (default: all, or the one of "
                                                                 "--policy's --env-kwargs)")
+    parser.add_argument("--pixel-metrics", action="store_true",
+                        help="also measure each method's pixel metric (OcclusionAvoidance: mean pixel occlusion of "
+                             "the endoscope image; ViewTracking: mean view-centre error, %% of the image width), "
+                             "rendering every step with the batched renderer")
     parser.add_argument("--no-progress", action="store_true")
 
 
@@ -341,7 +350,7 @@ def run(args: argparse.Namespace) -> int:
     for env_id in env_ids:
         table, results, meta[env_id] = evaluate_methods(
             env_id, extra, policies, env_kwargs=env_kwargs, episodes=args.episodes, grid=args.grid,
-            split=args.split, progress=not args.no_progress)
+            split=args.split, progress=not args.no_progress, pixel_metrics=args.pixel_metrics)
         summary[env_id] = table
         meta[env_id]["skipped"] = {**unusable, **meta[env_id].get("skipped", {})}
         report.append(markdown(env_id, table, results) + model_error_note(env_kwargs) + comparison_notes(env_id, table)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from continuum_gym.envs.benchmark import benchmark_of
 from continuum_gym.envs.helpers import row_name
+from continuum_gym.envs.obs_modes import OBSERVATION_KEYWORDS
 from continuum_gym.envs.spec import EnvSpec, registered_base
 
 if TYPE_CHECKING:
@@ -62,7 +63,9 @@ def discover_policies(directory: str | Path, skipped: dict | None = None) -> dic
             skipped[str(run)] = str(error).splitlines()[0]
             print(f"continuum-gym evaluate: skipping {run}: {skipped[str(run)]}", file=sys.stderr)
             continue
-        method = method_name(config.get("base_controller"), config.get("algo"), config.get("helpers") or ())
+        env_config = config.get("env_config") or config.get("env_kwargs") or {}
+        method = method_name(config.get("base_controller"), config.get("algo"), config.get("helpers") or (),
+                             env_config.get("obs_mode"))
         found.setdefault(config["env_id"], {}).setdefault(method, []).append(run)
     if not found and not skipped:
         print(f"continuum-gym evaluate: warning: --policies {directory} holds no trained run (config.yml + "
@@ -76,13 +79,16 @@ def sb3_algo(policy: Any) -> str | None:
     return name if name in ("ppo", "sac", "td3") and hasattr(policy, "predict") else None
 
 
-def method_name(base: str | None, algo: str | None, helpers: tuple | list = ()) -> str:
+def method_name(base: str | None, algo: str | None, helpers: tuple | list = (), obs_mode: str | None = None) -> str:
     """A learned method's row: ``residual_<base>`` / ``pure_rl`` for PPO (the headline rows), else with
-    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``); its helpers after ``+``."""
+    ``_<algo>`` appended (``residual_<base>_sac``, ``pure_rl_td3``); a policy that sees images has its
+    ``obs_mode`` appended (``residual_projected_gradient_rgbd``, ``+`` as ``_``); its helpers after ``+``."""
     from continuum_gym.plugins import split_reference
 
     name = f"residual_{split_reference(base)[1]}" if base else "pure_rl"
-    return row_name(name if algo in (None, "ppo") else f"{name}_{algo}", helpers)
+    name = name if algo in (None, "ppo") else f"{name}_{algo}"
+    name = name if obs_mode in (None, "state") else f"{name}_{str(obs_mode).replace('+', '_')}"
+    return row_name(name, helpers)
 
 
 def read_run_config(run: str | Path, config: Any) -> dict:
@@ -135,7 +141,9 @@ def policy_env_kwargs(spec: EnvSpec, config: dict) -> dict:
     (``env_kwargs``). Task keywords are not taken: every method runs on the same test tasks.
     """
     source = config.get("env_config") or config.get("env_kwargs") or {}
-    picked = {key: value for key, value in source.items() if key in benchmark_of(spec).policy_keys}
+    # what the policy acts on (its benchmark's policy_keys) and what it sees (obs_mode, image_size)
+    keys = (*benchmark_of(spec).policy_keys, *OBSERVATION_KEYWORDS)
+    picked = {key: value for key, value in source.items() if key in keys}
     spec.config_class.from_kwargs(**picked)  # the same checks as the env's: a broken config fails here, named
     return picked
 
@@ -155,7 +163,8 @@ def split_env_kwargs(spec: EnvSpec, env_kwargs: dict | None) -> tuple[dict, dict
     except ValueError as error:
         raise type(error)(f"env_kwargs (--env-kwargs): {error}") from None
     ignored = {k: env_kwargs.pop(k) for k in PROTOCOL_KEYS if k in env_kwargs}
-    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in benchmark_of(spec).policy_keys}
+    keys = (*benchmark_of(spec).policy_keys, *OBSERVATION_KEYWORDS)
+    policy = {k: env_kwargs.pop(k) for k in list(env_kwargs) if k in keys}
     return env_kwargs, policy, ignored
 
 

@@ -51,9 +51,11 @@ class Predictor:
         origin = f", from {self.source}" if self.source else ""
         return f"{self.name!r} ({self.kind}{origin})"
 
-    def act(self, observation: np.ndarray, action_dim: int) -> np.ndarray:
-        """Actions (N, action_dim) for observations (N, d); raises :class:`PolicyError` on a bad answer."""
-        n = observation.shape[0]
+    def act(self, observation: Any, action_dim: int) -> np.ndarray:
+        """Actions (N, action_dim) for observations (N, d) (or a dict of (N, ...) arrays: an image ``obs_mode``);
+        raises :class:`PolicyError` on a bad answer."""
+        n = len(next(iter(observation.values()))) if isinstance(observation, dict) else observation.shape[0]
+        shape = {k: v.shape for k, v in observation.items()} if isinstance(observation, dict) else observation.shape
         raw = self._act(observation)
         if isinstance(raw, tuple):  # SB3-style (actions, state)
             raw = raw[0]
@@ -66,7 +68,7 @@ class Predictor:
                               f"(step {self.steps})") from error
         if actions.shape != (n, action_dim):
             raise PolicyError(f"policy {self.label} returned actions of shape {actions.shape} for "
-                              f"observations of shape {observation.shape}: expected ({n}, {action_dim}) "
+                              f"observations of shape {shape}: expected ({n}, {action_dim}) "
                               f"(step {self.steps})")
         bad = ~np.isfinite(actions).all(axis=1)
         if bad.any():
@@ -80,7 +82,8 @@ class Predictor:
                 episode_start: np.ndarray | None = None, deterministic: bool = True
                 ) -> tuple[Any, tuple[np.ndarray, ...] | None]:
         """SB3's ``predict`` signature, for code that expects an SB3 policy."""
-        observation = np.asarray(observation, dtype=np.float32)
+        if not isinstance(observation, dict):
+            observation = np.asarray(observation, dtype=np.float32)
         return self._act(observation), state
 
 

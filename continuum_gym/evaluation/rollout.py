@@ -33,6 +33,8 @@ class ZeroResidual:
     def predict(self, observation: ArrayLike, state: tuple[np.ndarray, ...] | None = None,
                 episode_start: np.ndarray | None = None, deterministic: bool = False
                 ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        if isinstance(observation, dict):  # an image obs_mode: the measured state sets the batch shape
+            observation = observation["state"]
         observation = np.asarray(observation)
         return np.zeros(observation.shape[:-1] + (self.action_dim,), dtype=np.float32), state
 
@@ -47,7 +49,8 @@ def make_core(env_id: str, num_envs: int, **env_kwargs: Any) -> BatchedCore:
 
 
 def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: Progress | None = None,
-                 record: bool = False, helpers: Sequence[Callable[..., np.ndarray]] = ()) -> dict[str, np.ndarray]:
+                 record: bool = False, helpers: Sequence[Callable[..., np.ndarray]] = (),
+                 pixel_metrics: bool = False) -> dict[str, np.ndarray]:
     """Run one episode per task id (all in one batch) until each ends; returns per-episode metrics.
 
     Args:
@@ -59,6 +62,9 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
         record: also return per-step traces (``trace_<value>`` arrays of shape (steps, N), NaN after the end).
         helpers: helpers made for ``core``'s config (``envs.helpers.make_helpers``), applied in order to the
             clipped actions before each step.
+        pixel_metrics: also measure the env's pixel metrics (``envs/pixels.py``; e.g. ``mean_image_occlusion``),
+            rendering every step; a core whose ``obs_mode`` is an image mode always does, its policy sees the
+            images.
 
     Returns:
         dict of metric name -> (N,) array (the spec's episode metrics), plus ``return``, ``length`` and
@@ -72,6 +78,7 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     if core.num_envs != n:
         raise ValueError(f"core has {core.num_envs} rows for {n} task ids")
     spec = core.spec
+    observer = _observer(core, pixel_metrics)
     core.reset_rows(np.arange(n), task_ids)
     active = np.ones(n, dtype=np.uint8)
     faulted = core.non_finite().copy()  # rows with a value that is not finite (on_non_finite="truncate")
@@ -83,13 +90,18 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     clipped = np.zeros(n)
     action_dim = core.single_action_space.shape[0]
     while active.any():
-        actions = predictor.act(core.obs.astype(np.float32), action_dim)
+        observation = core.observations(copy=False)  # the images of an image obs_mode (core.pixels), or the state
+        actions = predictor.act(observation, action_dim)
         outside = np.abs(actions) > 1.0
         clipped[active.astype(bool)] += outside.mean(axis=1)[active.astype(bool)]
         actions = apply_helpers(helpers, core.obs, np.clip(actions, -1.0, 1.0), active)
         rewards, terminated, truncated = core.step(np.ascontiguousarray(actions), active)
         alive = active.astype(bool)
         values = core.step_values()
+        if observer is not None:
+            if observer is not core.pixels:  # the metrics' own observer: the core marks only its own
+                observer.stale(alive)
+            values.update(observer.info())
         for key, value in values.items():
             sums.setdefault(key, np.zeros(n))[alive] += value[alive]
             finals.setdefault(key, np.zeros(n))[alive] = value[alive]
@@ -110,7 +122,8 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
             "them would hide the failure, so none is reported. Find the plug-in with on_non_finite='raise' (the "
             "default), which names it")
     out = {}
-    for metric in spec.episode_metrics:
+    reductions = spec.episode_metrics + (observer.spec.episode_metrics if observer is not None else ())
+    for metric in reductions:
         if metric.reduce == "final":
             out[metric.name] = finals[metric.step_value]
         else:
@@ -121,3 +134,13 @@ def run_episodes(core: BatchedCore, policy: Any, task_ids: ArrayLike, progress: 
     if record:
         out.update({f"trace_{key}": np.array(value) for key, value in traces.items()})
     return out
+
+
+def _observer(core: BatchedCore, pixel_metrics: bool) -> Any:
+    """What measures the pixel metrics: the core's own observer (an image ``obs_mode``), one that renders only what
+    the metrics need (``pixel_metrics`` of a state core), else None."""
+    from continuum_gym.envs.pixels import PixelObserver
+
+    if core.pixels is not None or not pixel_metrics:
+        return core.pixels
+    return PixelObserver(core)

@@ -41,7 +41,7 @@ def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int
     table = {}
     for method, tasks in results.items():
         row = {}
-        for metric in spec.metrics:
+        for metric in table_metrics(spec, results):
             if metric.grid_metric:
                 grid_tasks = [t for t in tasks.values() if t["grid"]]
                 if grid_tasks:
@@ -132,7 +132,7 @@ def add_headroom(spec: EnvSpec, table: dict, results: dict, bases: dict | None =
 # ---------------------------------------------------------------------- report
 def markdown(env_id: str, table: dict, results: dict) -> str:
     spec = get_spec(env_id)
-    metrics = [m.name for m in spec.metrics] + [HEADROOM]
+    metrics = [m.name for m in table_metrics(spec, results)] + [HEADROOM]
     lines = [f"### {env_id}", "", "| method | " + " | ".join(metrics) + " |", "|---|" + "---|" * len(metrics)]
     for method, row in table.items():
         cells = []
@@ -158,14 +158,36 @@ def markdown(env_id: str, table: dict, results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def table_metrics(spec: EnvSpec, results: dict) -> tuple[Metric, ...]:
+    """The table's columns: the spec's metrics, with the env's pixel metric beside the headline one when the
+    episodes measured it (``evaluate --pixel-metrics``, ``envs/pixels.py``)."""
+    from continuum_gym.envs.pixels import PIXEL_SPECS, pixel_spec
+
+    if spec.env_id not in PIXEL_SPECS:
+        return spec.metrics
+    measured = {key for tasks in results.values() for t in tasks.values() for key in t.get("scores", {})}
+    extra = tuple(m for m in pixel_spec(spec.env_id).table_metrics if m.name in measured)
+    return spec.metrics[:1] + extra + spec.metrics[1:]
+
+
 def fmt(spec: EnvSpec, name: str, value: float) -> str:
     """A metric value as the tables show it (lengths in mm, percentages with one decimal)."""
+    metric: Metric | None
     try:
         metric = spec.metric(name)
     except KeyError:
-        metric = None
+        metric = _pixel_metric(spec, name)
     if metric is not None and metric.display_unit:
         return f"{value * metric.display_scale:.3f} {metric.display_unit}"
     if metric is not None and metric.unit == "%":
         return f"{value:.1f} %"
     return f"{value:.3g}" if abs(value) < 0.01 else f"{value:.3f}"
+
+
+def _pixel_metric(spec: EnvSpec, name: str) -> Metric | None:
+    """The pixel metric column ``name`` of the env (``envs/pixels.py``), or None."""
+    from continuum_gym.envs.pixels import PIXEL_SPECS, pixel_spec
+
+    if spec.env_id not in PIXEL_SPECS:
+        return None
+    return next((m for m in pixel_spec(spec.env_id).table_metrics if m.name == name), None)

@@ -119,3 +119,20 @@ def test_a_dataset_of_a_recorded_task_and_another_robot_rebuilds_them(root):
     for time in (0.0, 0.37, 0.9):  # the rebuilt spline is the recorded one, bit for bit
         np.testing.assert_array_equal(env.unwrapped.core.desired(0, time)[0], gym.make(
             OCCLUSION, **kwargs).unwrapped.core.desired(0, time)[0])
+
+
+def test_a_key_a_wrapper_adds_on_the_last_step_only_is_not_recorded(root, monkeypatch):
+    # rl_zoo3, once imported in a process, patches Gymnasium's TimeLimit to add info["TimeLimit.truncated"] on the
+    # step that ends an episode: the info keys then differ between steps, which Minari cannot store
+    class LastStepKey(gym.wrappers.TimeLimit):
+        def step(self, action):
+            obs, reward, terminated, truncated, info = super().step(action)
+            if terminated or truncated:
+                info["TimeLimit.truncated"] = truncated
+            return obs, reward, terminated, truncated, info
+
+    monkeypatch.setattr(gym.wrappers, "TimeLimit", LastStepKey)
+    dataset = create_dataset(OCCLUSION, "projected_gradient", split="validation", episodes=1,
+                             env_kwargs={"task": "hold", "max_episode_steps": 3})
+    episode = next(dataset.iterate_episodes())
+    assert len(episode.actions) == 3 and "TimeLimit.truncated" not in episode.infos

@@ -21,6 +21,7 @@ SPEC = register_env(EnvSpec(
     goal_entry_point="continuum_gym.envs.occlusion.goal:OcclusionAvoidanceGoalEnv",
     scene="continuum_gym.render.occlusion_scene:OcclusionScene",
     cameras=("external", "endoscope"),
+    pixels="continuum_gym.envs.occlusion.pixels:PIXELS",
 ))
 ENV_ID = SPEC.env_id
 

@@ -21,6 +21,7 @@ SPEC = register_env(EnvSpec(
     goal_entry_point="continuum_gym.envs.view_tracking.goal:ViewTrackingGoalEnv",
     scene="continuum_gym.render.view_scene:ViewTrackingScene",
     cameras=("external", "endoscope", "davinci"),
+    pixels="continuum_gym.envs.view_tracking.pixels:PIXELS",
 ))
 ENV_ID = SPEC.env_id
 
