@@ -159,3 +159,13 @@ def test_training_names_its_helpers(tmp_path):
     from continuum_gym.evaluation.methods import discover_policies
 
     assert list(discover_policies(tmp_path / "runs")[ENV]) == ["residual_dimension_reduced+overlap_polish"]
+
+
+def test_run_folders_name_the_mode_then_the_helpers():
+    from continuum_gym.agents.train import run_name
+
+    assert run_name(ENV, "ppo", "dimension_reduced", 1, ["overlap_polish"], "rgbd") == \
+        "ViewTracking_ppo_dimension_reduced_rgbd+overlap_polish_seed1"
+    # the pixel campaign's folders keep their names
+    assert run_name("ContinuumGym/OcclusionAvoidance-v0", "ppo", "projected_gradient", 0, (), "rgbd") == \
+        "OcclusionAvoidance_ppo_projected_gradient_rgbd_seed0"

@@ -387,7 +387,7 @@ def test_goal_env_puts_images_beside_the_goals_and_her_can_store_them():
 
 
 def test_rollout_and_evaluation_see_images_and_measure_the_pixel_metric():
-    from continuum_gym.evaluation.evaluate import method_name, policy_env_kwargs
+    from continuum_gym.evaluation.methods import method_name, policy_env_kwargs
     from continuum_gym.evaluation.rollout import ZeroResidual, make_core, run_episodes
     from continuum_gym.evaluation.tables import aggregate, table_metrics
 
@@ -411,10 +411,13 @@ def test_rollout_and_evaluation_see_images_and_measure_the_pixel_metric():
     assert "mean_image_occlusion" in aggregate(OCC, results)["base"]
     config = {"env_config": {"obs_mode": "rgbd", "image_size": 64, "base_controller": "projected_gradient"}}
     assert policy_env_kwargs(spec, config)["obs_mode"] == "rgbd"
-    assert method_name("projected_gradient", "ppo", "rgbd") == "residual_projected_gradient_rgbd"
-    assert method_name("projected_gradient", "ppo", "rgb+depth+segmentation") == \
+    assert method_name("projected_gradient", "ppo", obs_mode="rgbd") == "residual_projected_gradient_rgbd"
+    assert method_name("projected_gradient", "ppo", obs_mode="rgb+depth+segmentation") == \
         "residual_projected_gradient_rgb_depth_segmentation"
-    assert method_name("projected_gradient", "ppo", "state") == "residual_projected_gradient"
+    assert method_name("projected_gradient", "ppo", obs_mode="state") == "residual_projected_gradient"
+    # what it sees, then what acts after it
+    assert method_name("dimension_reduced", "sac", ["overlap_polish"], "rgbd") == \
+        "residual_dimension_reduced_sac_rgbd+overlap_polish"
 
 
 def test_config_round_trip_rebuilds_the_image_env(tmp_path):
