@@ -221,6 +221,9 @@ class BatchedCore:
         if self.pixels is not None:
             self.single_observation_space = self.pixels.space
 
+    if TYPE_CHECKING:  # for mypy only: the env's parts and methods (``_bind_parts``) are attributes of any name
+        def __getattr__(self, name: str) -> Any: ...
+
     def _bind_parts(self) -> None:
         """The env's own objects (its built-in controller, cameras, limits, ...) and methods as ``core.<name>``.
 
