@@ -128,9 +128,14 @@ def _git_commit():
         return None
 
 
+#: What a finished model.zip leaves out: the last observation batch (an image policy's is 20 MB of a 22 MB zip;
+#: SB3's ``learn`` resets the env when it is missing, and checkpoints keep it for a resume).
+FINAL_EXCLUDE = ("_last_obs", "_last_original_obs")
+
+
 def save_model_atomic(model: BaseAlgorithm, path: Path) -> None:
     buffer = io.BytesIO()
-    model.save(buffer)
+    model.save(buffer, exclude=list(FINAL_EXCLUDE))
     write_bytes_atomic(path, buffer.getvalue())
 
 

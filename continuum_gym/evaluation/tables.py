@@ -47,8 +47,10 @@ def aggregate(env_id: str, results: dict, optimum: dict | None = None, grid: int
                 if grid_tasks:
                     row[metric.name] = summarize(100.0 * grid_scores(grid_tasks[0], metric))
                 continue
-            scores = [np.stack(t["scores"][metric.name]) for t in tasks.values() if not t["grid"]]
-            row[metric.name] = summarize(_concat_tasks(scores))
+            scores = [np.stack(t["scores"][metric.name]) for t in tasks.values()
+                      if not t["grid"] and metric.name in t["scores"]]
+            if scores:  # a pixel metric only where it was measured (image policies; evaluate --pixel-metrics)
+                row[metric.name] = summarize(_concat_tasks(scores))
         table[method] = row
     if optimum:
         table.update(reference_rows(spec, results, optimum, grid))

@@ -10,6 +10,6 @@ envs=("${@:-ContinuumGym/OcclusionAvoidance-v0}")
 export OMP_NUM_THREADS=1 RAY_OVERRIDE_RESOURCES='{"CPU": 1}'   # Ray sees one CPU: one trial at a time
 for env in "${envs[@]}"; do
   short=${env#ContinuumGym/}; short=${short%-v0}
-  nice -n 10 continuum-gym sweep --env "$env" --algo ppo --hyperparams ppo_pixels.yml --seeds 0 1 2 \
+  nice -n ${NICE:-10} continuum-gym sweep --env "$env" --algo ppo --hyperparams ppo_pixels.yml --seeds 0 1 2 \
     --out "$out" --name "${short}_ppo_rgbd" --cpus-per-trial 1 --resume
 done

@@ -41,8 +41,20 @@ def collect(campaign: Path, into: Path) -> list[Path]:
         for name in FILES:
             if (run / name).is_file():
                 shutil.copy2(run / name, target / name)
+        slim(target / "model.zip", config.get("algo", "ppo"))
         added.append(target)
     return added
+
+
+def slim(path: Path, algo: str) -> None:
+    """``path`` saved again without the last observation batch (``agents.train.FINAL_EXCLUDE``), as the trainer
+    writes a final model since 0.3: runs of an earlier trainer kept it (20 MB of an image policy's 22 MB zip)."""
+    from stable_baselines3 import PPO, SAC, TD3
+
+    from continuum_gym.agents.train import save_model_atomic
+
+    model = {"ppo": PPO, "sac": SAC, "td3": TD3}[algo].load(path, device="cpu")
+    save_model_atomic(model, path)
 
 
 def main(argv=None) -> int:

@@ -517,3 +517,23 @@ def test_an_image_env_pickles_and_steps_again():
     b, *_ = again.step(np.zeros(8, dtype=np.float32))
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_a_table_of_image_and_state_policies_shows_the_pixel_metric_where_it_was_measured():
+    """An image policy measures the pixel metric, a state one does not (without --pixel-metrics): one table."""
+    from continuum_gym.evaluation.tables import aggregate, markdown
+
+    def task(**scores):
+        return {"hold": {"scores": {k: [np.asarray(v, dtype=float)] for k, v in scores.items()}, "traces": [],
+                         "grid": False}}
+
+    results = {"state": task(mean_voi=[0.2, 0.3], mean_tip_error_m=[1e-4, 2e-4], tip_in_view_fraction=[1, 1],
+                             mean_orientation_error_rad=[0.0, 0.0], visibility_guarded_fraction=[0, 0]),
+               "images": task(mean_voi=[0.1, 0.2], mean_tip_error_m=[1e-4, 2e-4], tip_in_view_fraction=[1, 1],
+                              mean_orientation_error_rad=[0.0, 0.0], visibility_guarded_fraction=[0, 0],
+                              mean_image_occlusion=[0.05, 0.07])}
+    table = aggregate(OCC, results)
+    assert "mean_image_occlusion" not in table["state"]
+    assert table["images"]["mean_image_occlusion"]["mean"] == pytest.approx(0.06)
+    text = markdown(OCC, table, results)
+    assert "| state | 0.250" in text and "| images | 0.150" in text
