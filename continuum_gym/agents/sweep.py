@@ -257,6 +257,12 @@ def summarise(results: Iterable[Any], metric: str, mode: str, env_id: str, algo:
     """
     rows: list[dict[str, Any]] = []
     for result in results:
+        if result.config is None:
+            # a trial that never started before the sweep was interrupted (Ray reports it without a config);
+            # `--resume` runs it
+            rows.append({"config": {}, "seed": None, metric: None, "timesteps": None,
+                         "error": "not started: the sweep was interrupted (continue with --resume)"})
+            continue
         config = dict(result.config)
         value = (result.metrics or {}).get(metric)
         rows.append({"config": config, "seed": config.get("seed"), metric: value,

@@ -182,3 +182,19 @@ def test_a_sweep_whose_trial_worker_is_killed_resumes_the_trial_from_its_checkpo
     assert start.startswith("resume from step") and int(start.split()[-1]) >= killed_at
     timesteps = np.load(folder / "evaluations.npz")["timesteps"].tolist()
     assert all(a < b for a, b in zip(timesteps, timesteps[1:])) and timesteps[-1] == 2048
+
+
+def test_an_interrupted_sweeps_summary_names_the_trials_that_never_started(tmp_path):
+    """Ray reports the trials an interruption left pending without a config: the summary lists them as not
+    started (with how to continue) instead of failing with a TypeError and losing the finished trials' table."""
+    from types import SimpleNamespace
+
+    from continuum_gym.agents.sweep import summarise
+
+    done = SimpleNamespace(config={"seed": 0, "learning_rate": 1e-4}, metrics={"mean_voi": 0.12, "timesteps": 4096},
+                           error=None)
+    pending = SimpleNamespace(config=None, metrics=None, error=None)
+    summary = summarise([done, pending], "mean_voi", "min", "ContinuumGym/OcclusionAvoidance-v0", "ppo", tmp_path)
+    assert summary["trials"][0]["mean_voi"] == 0.12 and summary["best_config"] == {"learning_rate": 1e-4}
+    assert "not started" in summary["trials"][1]["error"] and "--resume" in summary["trials"][1]["error"]
+    assert "not started" in (tmp_path / "sweep_results.md").read_text()
