@@ -89,9 +89,18 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     test_only, builtin = config.test_only_tasks, config.builtin_tasks
     work = [{"task": task, "task_split": "test" if task in test_only else "train", "base_controller": base}
             for base in (*spec.baselines, None) for task in builtin]
-    report(f"total {len(work) + 3}")  # the single envs, two vector envs, the library
+    # the step with a model-error plant (its own specialisation of the step kernel) and the batched renderer of the
+    # image observations (camera/), as evaluate --model-error, the pixel policies and their tests run them
+    work += [{"model_error": "severe"}, {"obs_mode": "rgb+depth+segmentation"}]
+    from continuum_gym.envs.helpers import HelperWrapper, helper_names
+
+    helpers = helper_names(env_id)
+    report(f"total {len(work) + len(helpers) + 3}")  # the single envs, the helpers, two vector envs, the library
     for kwargs in work:
         _step_twice(gym.make(env_id, **kwargs))
+        report("done")
+    for name in helpers:  # a helper's own kernels (ViewTracking's overlap lookahead), on the joint residual
+        _step_twice(HelperWrapper(gym.make(env_id, residual_space="joint"), [name]))
         report("done")
     for num_threads in (1, 2):
         _step_twice(gym.make_vec(env_id, num_envs=64, vectorization_mode="vector_entry_point", num_threads=num_threads))
