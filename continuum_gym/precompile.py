@@ -92,6 +92,8 @@ def warm_up(env_id: str, report: Callable[[str], None] = lambda message: None) -
     # the step with a model-error plant (its own specialisation of the step kernel) and the batched renderer of the
     # image observations (camera/), as evaluate --model-error, the pixel policies and their tests run them
     work += [{"model_error": "severe"}, {"obs_mode": "rgb+depth+segmentation"}]
+    # the bases the package ships as plug-ins (ViewTracking's distilled_optimum), which evaluate gives a row
+    work += [{"base_controller": reference.rpartition(":")[2]} for reference in config.packaged_controllers]
     from continuum_gym.envs.helpers import HelperWrapper, helper_names
 
     helpers = helper_names(env_id)
