@@ -16,9 +16,9 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from continuum_gym.envs.batched import check_actions
 from continuum_gym.envs.single import SceneOwner
 from continuum_gym.envs.spec import get_spec, registered_kwargs
+from continuum_gym.envs.stepping import check_actions
 from continuum_gym.envs.vector import row_generators
 from continuum_gym.validation import integer
 

@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 
-from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.envs.batched import BatchedCore
 from continuum_gym.envs.pixels import fast_render
+from continuum_gym.envs.stepping import check_actions
 from continuum_gym.validation import boolean, choice
 
 if TYPE_CHECKING:

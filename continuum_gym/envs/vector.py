@@ -25,9 +25,10 @@ import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 
-from continuum_gym.envs.batched import BatchedCore, check_actions
+from continuum_gym.envs.batched import BatchedCore
 from continuum_gym.envs.info import RewardTerms
 from continuum_gym.envs.single import SceneOwner, check_reset_options
+from continuum_gym.envs.stepping import check_actions
 from continuum_gym.validation import describe, integer
 
 if TYPE_CHECKING:
