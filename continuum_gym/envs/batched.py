@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, cast
+from typing import TYPE_CHECKING, Any, ClassVar, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -23,6 +23,7 @@ from continuum_gym.envs.declared import info_fields, step_values
 from continuum_gym.envs.info import RewardTerms, fields_table, info_batch, row_reader
 from continuum_gym.envs.pixels import make_observer
 from continuum_gym.envs.row_claims import KernelCall
+from continuum_gym.envs.scenes import OcclusionRowScene, RowScene
 from continuum_gym.envs.stepping import row_threads, step_threads
 from continuum_gym.validation import integer
 
@@ -36,22 +37,6 @@ if TYPE_CHECKING:
 
 #: Every observation entry is clipped to +-OBS_LIMIT (the observation space's bounds).
 OBS_LIMIT = 10.0
-
-
-class RowScene(Protocol):
-    """What a core asks of its pybullet scene (``spec.scene``, e.g. ``render.OcclusionScene``) to render a row."""
-
-    def show_row(self, core: Any, row: int) -> None: ...
-
-    def render(self, camera: str = ..., width: int = ..., height: int = ...) -> np.ndarray: ...
-
-    def close(self) -> None: ...
-
-
-class OcclusionRowScene(RowScene, Protocol):
-    """A scene that also measures the pixel occlusion of the endoscope image (``render.OcclusionScene``)."""
-
-    def pixel_occlusion(self, resolution: int = ...) -> float: ...
 
 
 class BatchedCore:

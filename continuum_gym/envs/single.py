@@ -21,9 +21,9 @@ if TYPE_CHECKING:
     import numpy.typing as npt
     from gymnasium import spaces
 
-    from continuum_gym.envs.batched import RowScene
     from continuum_gym.envs.config import EnvConfig
     from continuum_gym.envs.pixels import FastRender
+    from continuum_gym.envs.scenes import RowScene
 
 #: Keys ``reset(options=...)`` understands.
 RESET_OPTIONS = ("task_id",)
