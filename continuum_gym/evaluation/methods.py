@@ -11,6 +11,7 @@ table shows what learning adds and what the helper adds.
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,6 +40,22 @@ class MethodRun:
     helpers: tuple = field(default=())
 
 
+def _config_files(directory: Path) -> list[Path]:
+    """Every ``config.yml`` under ``directory``, through symbolic links too (a folder of links to chosen runs
+    is a common way to evaluate a selection; ``Path.rglob`` skips linked folders before Python 3.13). A
+    folder reached twice, e.g. by a link cycle, is read once."""
+    found, seen = [], set()
+    for root, dirs, files in os.walk(directory, followlinks=True):
+        real = os.path.realpath(root)
+        if real in seen:
+            dirs[:] = []
+            continue
+        seen.add(real)
+        if "config.yml" in files:
+            found.append(Path(root) / "config.yml")
+    return sorted(found)
+
+
 def discover_policies(directory: str | Path, skipped: dict | None = None) -> dict[str, dict[str, list[Path]]]:
     """{env_id: {method: [run dirs]}} from ``<dir>/**/config.yml`` + ``model.zip``.
 
@@ -53,7 +70,7 @@ def discover_policies(directory: str | Path, skipped: dict | None = None) -> dic
     directory = Path(directory)
     if not directory.is_dir():
         raise FileNotFoundError(f"--policies: no directory {directory}")
-    for config_path in sorted(directory.rglob("config.yml")):
+    for config_path in _config_files(directory):
         run = config_path.parent
         try:
             if not (run / "model.zip").is_file():

@@ -229,6 +229,27 @@ def test_unusable_runs_are_reported_and_skipped_and_an_empty_directory_warns(tmp
     assert "holds no trained run" in capsys.readouterr().err
 
 
+def test_a_folder_of_links_to_chosen_runs_finds_each_run_once(tmp_path):
+    """Runs gathered by symbolic links are found (``Path.rglob`` skips linked folders), a link cycle ends."""
+    import yaml
+
+    from continuum_gym.evaluation.methods import discover_policies
+
+    for seed in (0, 1):
+        run = tmp_path / "campaign" / f"run{seed}"
+        run.mkdir(parents=True)
+        (run / "config.yml").write_text(yaml.safe_dump(
+            {"env_id": "ContinuumGym/ViewTracking-v0", "algo": "ppo", "base_controller": "dimension_reduced"}))
+        (run / "model.zip").write_bytes(b"")
+    chosen = tmp_path / "chosen"
+    chosen.mkdir()
+    for seed in (0, 1):
+        (chosen / f"seed{seed}").symlink_to(tmp_path / "campaign" / f"run{seed}", target_is_directory=True)
+    (chosen / "loop").symlink_to(chosen, target_is_directory=True)
+    found = discover_policies(chosen)["ContinuumGym/ViewTracking-v0"]
+    assert sorted(path.name for path in found["residual_dimension_reduced"]) == ["seed0", "seed1"]
+
+
 def test_learned_rows_are_named_by_base_and_algorithm_and_say_how_many_seeds(tmp_path):
     """PPO keeps the headline names; SAC and TD3 rows carry their algorithm; every learned row says it."""
     import yaml
