@@ -229,7 +229,8 @@ instructions (README, "Which machine made these digits"): the baselines' rows he
 and can differ in the last digit from the README's table.
 
 **Training cost.** Env steps per run are the runs' own counts (PPO rounds up to whole rollouts).
-`continuum-gym train` does not record time, so the wall-clock per run and the learning curves against
+These runs were trained before `continuum-gym train` recorded its cost (the `wall_s` and `cpu_s` columns of
+`evaluations.npz` since 0.3), so the wall-clock per run and the learning curves against
 wall-clock are derived from the Ray Tune trial of each run (`experiments/reference_runs/collect_wall_clock.py` wrote
 `wall_clock.csv` beside each run's `evaluations.npz`): the running sum of Tune's `time_this_iter_s`
 over the trial's reports, i.e. the trial process's wall-clock including start-up, the 16-task validation

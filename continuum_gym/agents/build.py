@@ -84,10 +84,18 @@ def build(env_id: str, algo: str, base: str | None, seed: int, total: int, run: 
         state = {}
     history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
         run_dir / "evaluations.npz", unit.step)
+    # what the run has cost so far, earlier sessions included (a checkpoint carries both): wall-clock seconds and
+    # this process's CPU seconds (every thread: the learner's, the env's step threads, the evaluations)
+    elapsed_before, cpu_before = float(state.get("elapsed_s", 0.0)), float(state.get("cpu_s", 0.0))
+    started, cpu_started = time.monotonic(), time.process_time()
+
+    def cost() -> tuple[float, float]:
+        return elapsed_before + time.monotonic() - started, cpu_before + time.process_time() - cpu_started
+
     # its class is local to make_eval_callback (write(), records())
     evaluator: Any = make_eval_callback(env_id, dict(env_kwargs), run_dir, int(run["eval_freq"]),
                                         int(run["n_eval_episodes"]), report, history=history,
-                                        helpers=run.get("helpers") or ())
+                                        helpers=run.get("helpers") or (), cost=cost)
     if unit is not None:
         evaluator.write()  # the curve as of the checkpoint: rows of the lost stretch go
     burn_steps = int(run["burn_in_steps"]) if base is not None else 0
@@ -99,12 +107,10 @@ def build(env_id: str, algo: str, base: str | None, seed: int, total: int, run: 
         elif unit is not None and unit.legacy:
             snapshot = [p.detach().clone() for p in actor_parameters(model)]
         burn_in = ActorBurnIn(burn_steps, snapshot=snapshot)
-    elapsed_before = float(state.get("elapsed_s", 0.0))
-    started = time.monotonic()
-
     def extra_state() -> dict:
-        return {"algo": algo, "seed": seed, "total_timesteps": total, "elapsed_s": elapsed_before + time.monotonic()
-                - started, "evaluations": evaluator.records(), "burn_in_steps": burn_steps}
+        elapsed_s, cpu_s = cost()
+        return {"algo": algo, "seed": seed, "total_timesteps": total, "elapsed_s": elapsed_s, "cpu_s": cpu_s,
+                "evaluations": evaluator.records(), "burn_in_steps": burn_steps}
 
     def extra_files() -> dict:
         if burn_in is not None and model.num_timesteps <= burn_steps:

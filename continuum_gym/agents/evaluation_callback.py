@@ -18,12 +18,15 @@ if TYPE_CHECKING:
 
 #: First validation-split task id of the training evaluation (ids EVAL_TASK_OFFSET .. + n_eval_episodes).
 EVAL_TASK_OFFSET = 0
+#: the run's cost at each evaluation: wall-clock and CPU seconds since it started, earlier sessions included
+COST_COLUMNS = ("wall_s", "cpu_s")
 
 
 def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path, freq: int, n_episodes: int,
                        report: Callable[[int, float], None] | None = None,
                        history: Mapping[str, Iterable[float]] | None = None,
-                       helpers: Iterable[str] = ()) -> BaseCallback:
+                       helpers: Iterable[str] = (),
+                       cost: Callable[[], tuple[float, float]] | None = None) -> BaseCallback:
     """Periodic evaluation on held-out validation tasks (fixed ids), logged to TensorBoard and evaluations.npz.
 
     The validation split, not the test split: a sweep selects its configuration on these numbers, and
@@ -32,7 +35,9 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
     ``freq`` is in environment steps. ``history`` (``{column: list}``, from a checkpoint) continues an
     earlier learning curve: the next evaluation is ``freq`` steps after its last row, not at once.
     ``report(timesteps, value)`` is called after each evaluation (a sweep scheduler listens there).
-    ``helpers`` act after the policy, as in training (``envs/helpers.py``).
+    ``helpers`` act after the policy, as in training (``envs/helpers.py``). ``cost() -> (wall-clock s, CPU s)``,
+    the run's cost so far, is recorded with each evaluation (columns ``wall_s`` and ``cpu_s``; NaN in the rows of a
+    history that did not record them), so a run states what it cost without a scheduler's logs.
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -57,6 +62,9 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
             self.history = {"timesteps": [], "mean_return": [], metric: []}
             for key, values in (history or {}).items():
                 self.history[key] = list(values)
+            if cost is not None:
+                for key in COST_COLUMNS:  # a history from before the cost was recorded: unknown, not zero
+                    self.history[key] = self.history.get(key, [float("nan")] * len(self.history["timesteps"]))
             self.last = self.history["timesteps"][-1] if self.history["timesteps"] else -freq
 
         def _on_step(self) -> bool:
@@ -85,6 +93,9 @@ def make_eval_callback(env_id: str, env_kwargs: Mapping[str, Any], run_dir: Path
             self.history["timesteps"].append(int(self.num_timesteps))
             self.history["mean_return"].append(float(result["return"].mean()))
             self.history[metric].append(float(result[metric].mean()))
+            if cost is not None:
+                for key, value in zip(COST_COLUMNS, cost()):
+                    self.history[key].append(float(value))
             self.logger.record("eval/mean_return", float(result["return"].mean()))
             self.logger.record(f"eval/{metric}", float(result[metric].mean()))
             self.write()

@@ -87,20 +87,25 @@ def add_improvement(spec: EnvSpec, table: dict, results: dict, learned: list) ->
 
 
 def training_cost(run_dir: str | Path) -> dict[str, float | None]:
-    """{env_steps, wall_clock_s} of one run: the last evaluation's step count (``evaluations.npz``, else
-    ``config.yml``'s ``total_timesteps``) and the wall-clock at it (``wall_clock.csv``; None if not recorded)."""
+    """{env_steps, wall_clock_s, cpu_s} of one run: the last evaluation's step count (``evaluations.npz``, else
+    ``config.yml``'s ``total_timesteps``), the wall-clock at it (``wall_clock.csv``, else the run's own ``wall_s``
+    column) and the CPU seconds (its ``cpu_s`` column); None where the run did not record them."""
     import yaml
 
     run_dir = Path(run_dir)
     steps: int | None = None
+    recorded: dict[str, float | None] = {"wall_s": None, "cpu_s": None}
     if (run_dir / "evaluations.npz").is_file():
         with np.load(run_dir / "evaluations.npz") as data:
             steps = int(data["timesteps"][-1])
+            for key in recorded:
+                if key in data.files and len(data[key]) and np.isfinite(data[key][-1]):
+                    recorded[key] = float(data[key][-1])
     elif (run_dir / "config.yml").is_file():
         steps = (yaml.safe_load((run_dir / "config.yml").read_text()) or {}).get("total_timesteps")
     clock = read_wall_clock(run_dir)
     return {"env_steps": None if steps is None else int(steps),
-            "wall_clock_s": None if clock is None else float(clock[1][-1])}
+            "wall_clock_s": recorded["wall_s"] if clock is None else float(clock[1][-1]), "cpu_s": recorded["cpu_s"]}
 
 
 def read_wall_clock(run_dir: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
@@ -124,6 +129,9 @@ def add_training(table: dict, learned: list) -> None:
         entry: dict[str, Any] = {"env_steps_per_run": steps, "wall_clock_s_per_run": clocks}
         if None not in clocks:
             entry["wall_clock_s_mean"] = float(np.mean(cast(list[float], clocks)))
+        cpus = [r["cpu_s"] for r in per_run]
+        if any(c is not None for c in cpus):  # runs trained before the cost was recorded keep their entry as it was
+            entry["cpu_s_per_run"] = cpus
         table[method][TRAINING] = entry
 
 
@@ -132,12 +140,13 @@ def comparison_markdown(spec: EnvSpec, table: dict) -> str:
     rows = [(m, row) for m, row in table.items() if IMPROVEMENT in row or TRAINING in row]
     if not rows:
         return ""
+    timed = any("cpu_s_per_run" in row.get(TRAINING, {}) for _, row in rows)
     direction = "higher" if spec.metric(benchmark_of(spec).headline_metric).higher_is_better else "lower"
     lines = [f"Learned rows against `{benchmark_of(spec).headline_baseline}`: probability of improvement P(row's "
              f"{benchmark_of(spec).headline_metric} {direction} than the baseline's on the same episode) [95 % CI], and training "
              "cost per run:", "",
-             "| method | algo | seeds | P(improvement) | env steps per run | wall-clock per run (s) |",
-             "|---|---|---|---|---|---|"]
+             "| method | algo | seeds | P(improvement) | env steps per run | wall-clock per run (s) |"
+             + (" CPU per run (core-hours) |" if timed else ""), "|---|---|---|---|---|---|" + ("---|" if timed else "")]
     for method, row in rows:
         p = row.get(IMPROVEMENT)
         cell = f"{p['mean']:.3f} [{p['ci_low']:.3f}, {p['ci_high']:.3f}]" if p else "-"
@@ -145,8 +154,10 @@ def comparison_markdown(spec: EnvSpec, table: dict) -> str:
         steps = sorted(set(s for s in training.get("env_steps_per_run", []) if s is not None))
         clocks = [c for c in training.get("wall_clock_s_per_run", []) if c is not None]
         clock = (f"{np.mean(clocks):.0f} (range {min(clocks):.0f}-{max(clocks):.0f})" if clocks else "-")
+        cpus = [c / 3600 for c in training.get("cpu_s_per_run", []) if c is not None]
+        cpu = f"{np.mean(cpus):.2f} (range {min(cpus):.2f}-{max(cpus):.2f})" if cpus else "-"
         lines.append(f"| {method} | {row.get('algo') or '-'} | {row.get('n_seeds', '-')} | {cell} | "
-                     f"{', '.join(f'{s:,}' for s in steps) or '-'} | {clock} |")
+                     f"{', '.join(f'{s:,}' for s in steps) or '-'} | {clock} |" + (f" {cpu} |" if timed else ""))
     return "\n".join(lines) + "\n"
 
 

@@ -11,6 +11,7 @@ import json
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -140,6 +141,34 @@ def test_the_progress_bar_of_a_resumed_run_counts_from_its_checkpoint_to_the_ste
     assert all(n <= total for n, total in shown)
     assert "ends at step 1024" in err and "whole rollouts of 128" in err
     assert PPO.load(run_dir / "model.zip", device="cpu").num_timesteps == 1024
+
+
+def test_a_run_records_what_it_cost_and_a_resume_continues_the_count(tmp_path, monkeypatch):
+    """``wall_s`` and ``cpu_s`` at each evaluation: increasing, never more CPU than the training process spent,
+    and a resumed run counts on from its checkpoint's cost, not from zero."""
+    from continuum_gym.evaluation.comparison import training_cost
+
+    hp = _hyperparams(tmp_path)
+    started = time.process_time()
+    with monkeypatch.context() as patch:
+        _kill_at_write(patch, 3)
+        with pytest.raises(Killed):
+            _run(tmp_path, hp)
+    spent_first = time.process_time() - started
+    run_dir = tmp_path / "runs" / RUN
+    state = find_resumable(run_dir / "checkpoints")[0].state()
+    assert state["num_timesteps"] == 256 and 0 < state["cpu_s"] <= spent_first and state["elapsed_s"] > 0
+    started = time.process_time()
+    _run(tmp_path, hp, resume=True)
+    spent_second = time.process_time() - started
+    curve = np.load(run_dir / "evaluations.npz")
+    assert curve["timesteps"].tolist() == SCHEDULE
+    cpu, wall = curve["cpu_s"], curve["wall_s"]
+    assert np.all(np.diff(cpu) > 0) and np.all(np.diff(wall) > 0) and np.all(cpu > 0)
+    assert cpu[0] < state["cpu_s"] < cpu[1]  # the row before the checkpoint, then the resumed run's first
+    assert cpu[-1] <= state["cpu_s"] + spent_second
+    cost = training_cost(run_dir)
+    assert cost["cpu_s"] == cpu[-1] and cost["wall_clock_s"] == wall[-1] and cost["env_steps"] == 1024
 
 
 def test_sigkill_while_publishing_a_unit_keeps_the_previous_one(tmp_path, capsys):

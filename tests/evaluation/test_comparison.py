@@ -125,3 +125,24 @@ def test_evaluate_on_the_reference_layout_gives_every_learned_row_its_algo_seeds
         assert row[TRAINING]["env_steps_per_run"][0] >= 1_000_000
     assert IMPROVEMENT not in table["projected_gradient"] and TRAINING not in table["minimum_norm"]
 
+
+
+def test_the_cost_a_run_recorded_reaches_the_table_and_runs_without_it_keep_their_entry(tmp_path):
+    """Runs that record ``cpu_s`` (``continuum-gym train`` does) get a CPU column in core-hours; a table of runs
+    that did not is what it was (the shipped policies' rows, the golden files)."""
+    from continuum_gym.evaluation.comparison import add_training, comparison_markdown
+
+    for name, cpu in (("a", [0.0, 3600.0, 7200.0]), ("b", [0.0, 1800.0, 5400.0]), ("old", None)):
+        columns = {"timesteps": np.array([4, 1000, 2000]), "mean_return": np.zeros(3), "mean_or": np.zeros(3)}
+        if cpu is not None:
+            columns |= {"cpu_s": np.array(cpu), "wall_s": np.array(cpu) * 2}
+        (tmp_path / name).mkdir()
+        np.savez(tmp_path / name / "evaluations.npz", **columns)
+    table = {"timed": {"algo": "ppo", "n_seeds": 2}, "untimed": {"algo": "ppo", "n_seeds": 1}}
+    add_training(table, [("timed", [tmp_path / "a", tmp_path / "b"]), ("untimed", [tmp_path / "old"])])
+    assert table["timed"][TRAINING] == {"env_steps_per_run": [2000, 2000], "wall_clock_s_per_run": [14400.0, 10800.0],
+                                        "wall_clock_s_mean": 12600.0, "cpu_s_per_run": [7200.0, 5400.0]}
+    assert table["untimed"][TRAINING] == {"env_steps_per_run": [2000], "wall_clock_s_per_run": [None]}
+    text = comparison_markdown(get_spec(VIEW), table)
+    assert "CPU per run (core-hours)" in text and "| 1.75 (range 1.50-2.00) |" in text
+    assert "CPU per run" not in comparison_markdown(get_spec(VIEW), {"untimed": table["untimed"]})
