@@ -85,8 +85,10 @@ def build(env_id: str, algo: str, base: str | None, seed: int, total: int, run: 
     history = state.get("evaluations") if unit is None or not unit.legacy else history_until(
         run_dir / "evaluations.npz", unit.step)
     # what the run has cost so far, earlier sessions included (a checkpoint carries both): wall-clock seconds and
-    # this process's CPU seconds (every thread: the learner's, the env's step threads, the evaluations)
-    elapsed_before, cpu_before = float(state.get("elapsed_s", 0.0)), float(state.get("cpu_s", 0.0))
+    # this process's CPU seconds (every thread: the learner's, the env's step threads, the evaluations). A checkpoint
+    # written before a count was kept leaves it unknown (NaN) for the rest of the run, not restarted from zero.
+    unknown = float("nan") if unit is not None else 0.0
+    elapsed_before, cpu_before = (float(state.get(key, unknown)) for key in ("elapsed_s", "cpu_s"))
     started, cpu_started = time.monotonic(), time.process_time()
 
     def cost() -> tuple[float, float]:

@@ -304,7 +304,10 @@ def test_wall_time_trigger_checkpoints_early_and_changes_no_result(tmp_path):
     a, b = (PPO.load(d / "model.zip", device="cpu").policy.state_dict() for d in (by_time, by_steps))
     assert all(torch.equal(a[k], b[k]) for k in a)
     curves = [np.load(d / "evaluations.npz") for d in (by_time, by_steps)]
-    assert all(np.array_equal(curves[0][k], curves[1][k]) for k in curves[0].files)
+    from continuum_gym.agents.evaluation_callback import COST_COLUMNS
+
+    assert set(COST_COLUMNS) < set(curves[0].files)  # what each run cost differs; its results do not
+    assert all(np.array_equal(curves[0][k], curves[1][k]) for k in curves[0].files if k not in COST_COLUMNS)
 
 
 def test_a_finished_run_is_never_overwritten(tmp_path, capsys):
@@ -344,6 +347,9 @@ def test_a_run_with_the_old_single_file_checkpoint_resumes(tmp_path, monkeypatch
     assert "from step 256" in capsys.readouterr().err
     assert not (folder / "latest.zip").exists() and not (folder / "state.json").exists()
     assert _unit_steps(run_dir) == [896, 1024] and _curve(run_dir) == SCHEDULE
+    # the old state kept no cost: the run's cost stays unknown rather than counting this session only
+    curve = np.load(run_dir / "evaluations.npz")
+    assert np.isnan(curve["cpu_s"]).all() and np.isnan(curve["wall_s"]).all()
 
 
 def _write(path, text):
