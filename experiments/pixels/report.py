@@ -1,13 +1,14 @@
 """Issue 56: the pixel reference runs' table of docs/pixel-results.md, from one test-split evaluation.
 
-Reads the JSON of ``continuum-gym evaluate --pixel-metrics --split test --json FILE`` run on a folder that holds,
+Reads the JSON of ``continuum-gym evaluate --pixel-metrics --split test --json FILE`` (or several, one per env:
+their envs are merged, a later file's env replacing an earlier one's) run on a folder that holds,
 per env, the state residuals and the pixel residuals on the same base (``select.sh`` links them), and writes
 the table between the ``pixel-runs`` markers of ``docs/pixel-results.md``: per pixel row its seeds, headline
 metric, pixel metric, its base's and the state residual's headline metric, whether the pixel row's CI is
 separated from its base's (the issue's "beats its base with separated CIs"), and the gain recovered:
 (pixel - base) / (state - base) on the headline metric, the share of the state residual's gain pixels keep.
 
-    python experiments/pixels/report.py ~/campaigns/pixels/final/results.json
+    python experiments/pixels/report.py ~/campaigns/pixels/final/results.json [vt.json ...]
 """
 
 from __future__ import annotations
@@ -64,8 +65,12 @@ def rows(results: dict) -> list[str]:
     return out
 
 
-def main(path: str) -> int:
-    results = json.loads(Path(path).read_text())
+def main(*paths: str) -> int:
+    if not paths:
+        raise SystemExit("usage: report.py RESULTS.json [MORE.json ...]")
+    results: dict = {}
+    for path in paths:
+        results.update(json.loads(Path(path).read_text()))
     text = DOCS.read_text()
     start, end = (re.escape(marker) for marker in MARKERS)
     block = "\n".join([MARKERS[0], *rows(results), MARKERS[1]])

@@ -4,16 +4,17 @@
 # the state residual and the pixel residual on the same test episodes. Usage:
 #   bash experiments/pixels/select.sh OUT [ENV ...]       (ENV: OcclusionAvoidance, ViewTracking; default both)
 #   continuum-gym evaluate --policies OUT --env ContinuumGym/<ENV>-v0 --pixel-metrics --split test --json OUT/results.json
-#   python experiments/pixels/report.py OUT/results.json
+#   python experiments/pixels/report.py OUT/results.json [MORE.json ...]
+# Each env's base is its benchmark's headline base (`benchmark_of(spec).headline_baseline`).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 out=${1:?usage: select.sh OUT [ENV ...]}
 shift
 envs=("$@")
 [ ${#envs[@]} -eq 0 ] && envs=(OcclusionAvoidance ViewTracking)
-declare -A base=([OcclusionAvoidance]=projected_gradient [ViewTracking]=dimension_reduced)
 for env in "${envs[@]}"; do
-  b=${base[$env]:?"unknown env $env (OcclusionAvoidance or ViewTracking)"}
+  b=$(python -c "import sys; from continuum_gym.envs.benchmark import benchmark_of
+print(benchmark_of(f'ContinuumGym/{sys.argv[1]}-v0').headline_baseline)" "$env")
   mkdir -p "$out/$env-v0"
   n=0
   for run in "$root/reference-runs/$env-v0/${env}_ppo_${b}_seed"* "$root/reference-runs/$env-v0/${env}_ppo_${b}_rgbd_seed"*; do
