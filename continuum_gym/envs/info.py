@@ -221,15 +221,6 @@ def fields_table(fields: Sequence[InfoField]) -> str:
     return "\n".join(f"    - ``{f.name}``: {f.doc}" for f in fields)
 
 
-def env_docstring(template: str, fields: Sequence[InfoField], config_class: Any, observation: str = "") -> str:
-    """An env's docstring: ``{info}`` filled with the table of its info fields, ``{arguments}`` with its
-    config's keyword table (``EnvConfig.arguments_table``), indented as the docstring is, and
-    ``{observation}`` with ``observation`` (its layout's ``Layout.table``)."""
-    arguments = "\n".join("    " + line for line in config_class.arguments_table().splitlines())
-    return template.replace("{info}", fields_table(fields)).replace("{arguments}", arguments) \
-        .replace("{observation}", observation)
-
-
 class RewardTerms(np.ndarray):
     """The weighted reward terms of a step: a float64 array that also reads like a ``{term: value}`` dict.
 

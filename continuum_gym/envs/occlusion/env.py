@@ -137,6 +137,8 @@ _DOC = env_docstring("""The multi-backbone continuum robot of Sarli & Simaan bes
 
 {observation}
 
+{image_modes}
+
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``):
     ``voi`` = -w VOI; ``tip_position`` = -w |e_p| / 1 mm; ``tip_orientation`` = -w |e_R| / 0.01 rad;
@@ -154,30 +156,20 @@ _DOC = env_docstring("""The multi-backbone continuum robot of Sarli & Simaan bes
     ``truncated`` at the task's duration (hold 1.5 s, random 5 s, circle 10 s; mixed: its instance's).
 
     ## Info
-    One layout for the single env, the native vector env and the SB3 adapter: numpy scalars
-    (float64, bool_, int64) and arrays in the single env, (N, ...) arrays with Gymnasium's ``_<key>``
-    masks in the vector env.
+{info_intro}
 {info}
-    - ``reward_terms``: the weighted reward terms, read by name like a dict (``info["reward_terms"]["voi"]``;
-      their sum is the reward) and a float64 array in ``reward_terms.names`` order; ``action_clipped``: the
-      action was clipped to [-1, 1].
+{info_terms}
 
     ## Arguments
     Keyword arguments of ``gym.make`` (or one ``config=OcclusionConfig(...)``), validated in one place
     (``continuum_gym.envs.config``); physics limits the paper lacks are assumptions (paper-notes §5).
     Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"`` or
     ``"endoscope"``), ``pixel_occlusion`` (add the pixel-occlusion fraction to ``info``; slow).
-    ``num_threads``: threads a batch of 32 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
-    default 1 when torch is loaded in the process, so a learner's own threads are not oversubscribed,
-    else all of numba's threads); results do not depend on it.
+{threads}
 
 {arguments}
 
-    ## Version History
-    - v0 (continuum-gym 0.1): initial release. Later in 0.1, with the same dynamics and rewards: robots,
-      tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
-      reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
-      takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
+{version_history}
     """, ROWS, OcclusionConfig, OBSERVATION.table(3))
 
 

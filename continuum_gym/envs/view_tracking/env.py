@@ -141,6 +141,9 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
 
 {observation}
 
+{image_modes}
+    The da Vinci's view, the one to reproduce, comes under the same modalities as ``goal_rgb``, ``goal_depth``, ...
+
     ## Rewards
     Sum of weighted terms (``reward_weights``; each in ``info["reward_terms"][term]``): ``overlap`` = +w OR;
     ``position`` = -w eps_p / 0.01 m; ``orientation`` = -w eps_R (rad); ``action`` = -w mean(a^2);
@@ -155,13 +158,9 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
     paper's T_max; mixed: its instance's); ``terminated`` only if the state becomes non-finite.
 
     ## Info
-    One layout for the single env, the native vector env and the SB3 adapter: numpy scalars
-    (float64, bool_, int64) and arrays in the single env, (N, ...) arrays with Gymnasium's ``_<key>``
-    masks in the vector env.
+{info_intro}
 {info}
-    - ``reward_terms``: the weighted reward terms, read by name like a dict (``info["reward_terms"]["voi"]``;
-      their sum is the reward) and a float64 array in ``reward_terms.names`` order; ``action_clipped``: the
-      action was clipped to [-1, 1].
+{info_terms}
 
     ## Arguments
     Keyword arguments of ``gym.make`` (or one ``config=ViewTrackingConfig(...)``), validated in one place
@@ -170,17 +169,11 @@ _DOC = env_docstring("""The 2-segment continuum endoscope of Deng, Xu et al. rep
     [0, pi/2]; deltas wrapped to [-pi, pi); clamping is reported in ``info["clamped_joints"]``.
     Front-end arguments: ``render_mode`` (``None`` or ``"rgb_array"``), ``camera`` (``"external"``,
     ``"endoscope"`` or ``"davinci"``).
-    ``num_threads``: threads a batch of 128 rows or more is stepped on (1 to ``NUMBA_NUM_THREADS``;
-    default 1 when torch is loaded in the process, so a learner's own threads are not oversubscribed,
-    else all of numba's threads); results do not depend on it.
+{threads}
 
 {arguments}
 
-    ## Version History
-    - v0 (continuum-gym 0.1): initial release. Later in 0.1, with the same dynamics and rewards: robots,
-      tasks, controllers and reward terms as plug-ins; ``info`` holds numpy scalars, and the weighted
-      reward terms ``reward_terms`` a named float64 array (still read like the former dict); the vector env
-      takes ``autoreset_mode``, ``reset_mask``, ``render_mode``, ``camera`` and ``pixel_occlusion``.
+{version_history}
     """, ROWS, ViewTrackingConfig, OBSERVATION.table())
 
 
