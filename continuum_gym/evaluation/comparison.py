@@ -135,6 +135,15 @@ def add_training(table: dict, learned: list) -> None:
         table[method][TRAINING] = entry
 
 
+def _spread(values: list, scale: float, fmt: str) -> str:
+    """"mean (range min-max)" of the recorded ``values`` times ``scale`` (None: not recorded), or "-"."""
+    known = [v * scale for v in values if v is not None]
+    if not known:
+        return "-"
+    low, high = (fmt.format(v) for v in (min(known), max(known)))
+    return f"{fmt.format(np.mean(known))} (range {low}-{high})"
+
+
 def comparison_markdown(spec: EnvSpec, table: dict) -> str:
     """Markdown of the learned rows' probability of improvement and training cost ("" if none has either)."""
     rows = [(m, row) for m, row in table.items() if IMPROVEMENT in row or TRAINING in row]
@@ -152,10 +161,8 @@ def comparison_markdown(spec: EnvSpec, table: dict) -> str:
         cell = f"{p['mean']:.3f} [{p['ci_low']:.3f}, {p['ci_high']:.3f}]" if p else "-"
         training = row.get(TRAINING, {})
         steps = sorted(set(s for s in training.get("env_steps_per_run", []) if s is not None))
-        clocks = [c for c in training.get("wall_clock_s_per_run", []) if c is not None]
-        clock = (f"{np.mean(clocks):.0f} (range {min(clocks):.0f}-{max(clocks):.0f})" if clocks else "-")
-        cpus = [c / 3600 for c in training.get("cpu_s_per_run", []) if c is not None]
-        cpu = f"{np.mean(cpus):.2f} (range {min(cpus):.2f}-{max(cpus):.2f})" if cpus else "-"
+        clock = _spread(training.get("wall_clock_s_per_run", []), 1.0, "{:.0f}")
+        cpu = _spread(training.get("cpu_s_per_run", []), 1 / 3600, "{:.2f}")  # seconds -> core-hours
         lines.append(f"| {method} | {row.get('algo') or '-'} | {row.get('n_seeds', '-')} | {cell} | "
                      f"{', '.join(f'{s:,}' for s in steps) or '-'} | {clock} |" + (f" {cpu} |" if timed else ""))
     return "\n".join(lines) + "\n"
